@@ -1,0 +1,132 @@
+"""Benchmark of the identification pipeline on thesis-length simulated sessions.
+
+For each path: a session like the seed's (20 s noise with its 3 s transient, two 5 s
+sweeps), written to WAV and loaded back; then the full seed grid (gamma 10..1000
+step 10 x order 1..20 = 2000 candidates) timed stage by stage over several repeats
+(medians), the output-error refinement, peak memory, and the figures of the
+``seed-average`` and ``h1`` estimators side by side on the same session.
+
+Run:  python benchmarks/bench_identify.py [--repeats 5]   (prints a Markdown section)
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import resource
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sysid.grid import grid_search
+from sysid.identify import IdentificationOptions, identify
+from sysid.recordings import load_recording
+from sysid.simulate import SessionSpec, simulate_session, write_session
+from sysid.spectra import estimate_spectra
+from sysid.validation import noise_floor, simulated_rms, sweep_spectrum
+
+BAND = np.linspace(20.0, 1500.0, 600)
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def _frf_error(model, plant):
+    ratio = model.frequency_response(BAND) / plant.frequency_response(BAND)
+    return float(np.max(np.abs(20 * np.log10(np.abs(ratio))))), float(np.max(np.abs(np.angle(ratio, deg=True))))
+
+
+def bench_path(path: str, repeats: int, folder: Path) -> dict:
+    session = simulate_session(SessionSpec(path=path, seed=2026))
+    files = write_session(session, folder / path)
+    t0 = time.perf_counter()
+    noise = load_recording(files["noise"])
+    sweeps = [load_recording(files["sweep1"]), load_recording(files["sweep2"])]
+    load_s = time.perf_counter() - t0
+
+    stages = {"spectra": [], "smoothing": [], "subspace": [], "validation": [], "grid total": []}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        body = noise.trimmed(3.0)
+        spectra = estimate_spectra(body, "h1")
+        sweep_spectra = [sweep_spectrum(s) for s in sweeps]
+        t1 = time.perf_counter()
+        grid = grid_search(spectra, sweep_spectra, (20.0, 5000.0))
+        t2 = time.perf_counter()
+        stages["spectra"].append(t1 - t0)
+        for key in ("smoothing", "subspace", "validation"):
+            stages[key].append(grid.stage_seconds[key])
+        stages["grid total"].append(t2 - t0)
+
+    floor = noise_floor(*sweeps)
+    true_rms = simulated_rms(session.plant, sweeps)
+    rows = {}
+    for estimator in ("seed-average", "h1"):
+        t0 = time.perf_counter()
+        result = identify(noise, sweeps, path, IdentificationOptions(estimator=estimator))
+        seconds = time.perf_counter() - t0
+        info = result.model.identification
+        rows[estimator] = {
+            "seed_choice": (info["seed_choice"]["gamma"], info["seed_choice"]["order"]),
+            "seed_rms": result.seed_rms,
+            "seed_frf": _frf_error(result.seed_model, session.plant),
+            "final_order": result.model.order,
+            "final_rms": info["rms"],
+            "final_frf": _frf_error(result.model, session.plant),
+            "refine_s": result.stage_seconds.get("refinement", 0.0),
+            "total_s": seconds,
+        }
+    return {"load": load_s, "stages": {k: statistics.median(v) for k, v in stages.items()},
+            "grid_runs": stages["grid total"], "floor": floor, "true_rms": true_rms, "rows": rows,
+            "candidates": grid.rms.size, "stable": int(np.isfinite(grid.rms).sum())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        results = {path: bench_path(path, args.repeats, Path(tmp)) for path in ("fb", "ff")}
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+    print("## Identification (issue 2)\n")
+    print(f"Machine: {_cpu_model()}, {__import__('os').cpu_count()} cores, Python {platform.python_version()}, "
+          f"numpy {np.__version__}. Date: {time.strftime('%Y-%m-%d')}. Command: `python benchmarks/bench_identify.py "
+          f"--repeats {args.repeats}`.\n")
+    print("Session: simulated like the seed's (appendix-A plant, 20 s low-passed noise incl. 3 s transient, two 5 s "
+          "log sweeps 20 Hz-4 kHz, output noise 2e-4 FS, input noise 2e-5 FS, 16-bit). Full seed grid: gamma 10..1000 "
+          "step 10 x order 1..20.\n")
+    print(f"Stage times, median of {args.repeats} runs (s):\n")
+    print("| path | load 3 WAVs | spectra | smoothing | subspace (QR+SVD per gamma, 20 orders) | validation (2000 candidates) | grid total | candidates (stable) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for path, r in results.items():
+        s = r["stages"]
+        print(f"| {path} | {r['load']:.3f} | {s['spectra']:.3f} | {s['smoothing']:.3f} | {s['subspace']:.3f} | "
+              f"{s['validation']:.3f} | **{s['grid total']:.2f}** (min {min(r['grid_runs']):.2f}, max {max(r['grid_runs']):.2f}) | "
+              f"{r['candidates']} ({r['stable']}) |")
+    print(f"\nPeak resident memory of the whole benchmark process: {peak_mib:.0f} MiB.\n")
+    print("Estimators on the same session (rms in FS over both sweeps, 20 Hz-4 kHz; FRF error = max over 20 Hz-1.5 kHz "
+          "against the true plant):\n")
+    print("| path | estimator | seed grid choice (gamma, n) | seed rms / floor | seed FRF error (dB, deg) | refined order | refined rms / floor | refined FRF error (dB, deg) | refinement s | identify total s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for path, r in results.items():
+        for estimator, row in r["rows"].items():
+            print(f"| {path} | {estimator} | {row['seed_choice']} | {row['seed_rms'] / r['floor']:.2f} | "
+                  f"{row['seed_frf'][0]:.2f}, {row['seed_frf'][1]:.1f} | {row['final_order']} | {row['final_rms'] / r['floor']:.3f} | "
+                  f"{row['final_frf'][0]:.4f}, {row['final_frf'][1]:.3f} | {row['refine_s']:.1f} | {row['total_s']:.1f} |")
+        print(f"| {path} | true plant | | | | | {r['true_rms'] / r['floor']:.3f} | | | |")
+    print(f"\nNoise floors (FS): fb {results['fb']['floor']:.3e}, ff {results['ff']['floor']:.3e}.")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,54 @@
+"""Pieces shared by the command modules: recording options, output checks, summaries."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import HelmetAncError
+from ..identify import Identification
+from ..recordings import load_recording
+
+__all__ = ["add_recording_options", "load_sweeps", "check_output", "identification_summary"]
+
+
+def add_recording_options(parser: argparse.ArgumentParser, noise: bool = True) -> None:
+    if noise:
+        parser.add_argument("--noise", required=True, metavar="N.wav", help="white-noise recording (identification)")
+    parser.add_argument("--sweep", action="append", required=True, metavar="S.wav",
+                        help="swept-sine recording (validation); give it twice")
+    parser.add_argument("--input-channel", type=int, default=0, help="channel of the path input (default 0)")
+    parser.add_argument("--output-channel", type=int, default=1, help="channel of the ear microphone (default 1)")
+
+
+def load_sweeps(args) -> list:
+    if len(args.sweep) != 2:
+        raise HelmetAncError(f"give --sweep exactly twice (the two repeated sweeps); found {len(args.sweep)}")
+    return [load_recording(p, args.input_channel, args.output_channel) for p in args.sweep]
+
+
+def check_output(path: str) -> Path:
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise HelmetAncError(f"{target}: folder {folder} does not exist")
+    if target.is_dir():
+        raise HelmetAncError(f"{target}: is a folder; give a file name")
+    return target
+
+
+def identification_summary(result: Identification) -> str:
+    model = result.model
+    info = model.identification
+    lines = [
+        f"path {model.path}: estimator {info['estimator']}, fs {model.fs:g} Hz",
+        f"  seed grid choice : gamma {info['seed_choice']['gamma']}, order {info['seed_choice']['order']}, "
+        f"rms {result.seed_rms:.3e} FS ({result.seed_rms / result.noise_floor:.2f}x noise floor)",
+    ]
+    if result.refined_rms is not None:
+        lines.append(f"  refined (output error): order {info['refinement']['order'] if 'refinement' in info else model.order}, "
+                     f"rms {result.refined_rms:.3e} FS ({result.refined_rms / result.noise_floor:.2f}x noise floor)")
+    lines.append(f"  chosen model     : gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
+                 f"noise floor {result.noise_floor:.3e} FS, {'stable' if model.stable else 'UNSTABLE'} "
+                 f"(largest pole radius {model.spectral_radius:.6f})")
+    return "\n".join(lines)

@@ -1,0 +1,45 @@
+"""``helmet-anc identify``: a stable model of one path from a noise recording and two sweeps."""
+
+from __future__ import annotations
+
+from ..grid import parse_range, terminal_progress
+from ..identify import IdentificationOptions, identify
+from ..model import atomic_write_text
+from ..recordings import load_recording
+from ..spectra import ESTIMATORS
+from .common import add_recording_options, check_output, identification_summary, load_sweeps
+
+ORDER = 20
+
+
+def register(commands) -> None:
+    parser = commands.add_parser("identify", help="identify a model from a noise recording and two sweeps")
+    add_recording_options(parser)
+    parser.add_argument("--path", choices=("fb", "ff"), default="fb")
+    parser.add_argument("--estimator", choices=ESTIMATORS, default="h1")
+    parser.add_argument("--gammas", default="10:1000:10", metavar="A:B:STEP", help="smoothing widths (default 10:1000:10)")
+    parser.add_argument("--orders", default="1:20", metavar="A:B", help="model orders (default 1:20)")
+    parser.add_argument("--no-refine", action="store_true", help="stop at the seed's grid choice")
+    parser.add_argument("--feedthrough", action="store_true", help="estimate a direct term D (default D = 0)")
+    parser.add_argument("--mat", metavar="FILE.mat", help="also export the model for MATLAB")
+    parser.add_argument("-o", "--output", required=True, metavar="model.json")
+    parser.set_defaults(handler=run)
+
+
+def run(args) -> int:
+    output = check_output(args.output)
+    mat = check_output(args.mat) if args.mat else None
+    options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
+                                    orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
+                                    feedthrough=args.feedthrough)
+    noise = load_recording(args.noise, args.input_channel, args.output_channel)
+    sweeps = load_sweeps(args)
+    result = identify(noise, sweeps, args.path, options, progress=terminal_progress())
+    table = output.with_name(output.stem + ".grid.csv")
+    result.model.save(output)
+    atomic_write_text(table, result.grid.to_csv())
+    if mat:
+        result.model.save_mat(mat)
+    print(identification_summary(result))
+    print(f"wrote {output} and {table}" + (f" and {mat}" if mat else ""))
+    return 0

@@ -1,0 +1,34 @@
+"""``helmet-anc simulate``: write a synthetic session like the seed's experiment."""
+
+from __future__ import annotations
+
+from ..errors import HelmetAncError
+from ..simulate import SessionSpec, simulate_session, write_session
+
+ORDER = 10
+
+
+def register(commands) -> None:
+    parser = commands.add_parser("simulate", help="write a synthetic session (noise.wav, sweep1/2.wav, truth.json)")
+    parser.add_argument("outdir")
+    parser.add_argument("--path", choices=("fb", "ff"), default="fb")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--noise-seconds", type=float, default=20.0)
+    parser.add_argument("--sweep-seconds", type=float, default=5.0)
+    parser.add_argument("--output-noise", type=float, default=2e-4, help="ear-microphone noise RMS (FS)")
+    parser.add_argument("--input-noise", type=float, default=2e-5, help="input-channel noise RMS (FS)")
+    parser.set_defaults(handler=run)
+
+
+def run(args) -> int:
+    spec = SessionSpec(path=args.path, seed=args.seed, noise_duration=args.noise_seconds, sweep_duration=args.sweep_seconds,
+                       output_noise=args.output_noise, input_noise=args.input_noise)
+    if args.noise_seconds <= spec.transient_s + 0.2:
+        raise HelmetAncError(f"--noise-seconds must exceed the {spec.transient_s:g} s transient; found {args.noise_seconds:g}")
+    if args.sweep_seconds <= 0.1:
+        raise HelmetAncError(f"--sweep-seconds must be above 0.1; found {args.sweep_seconds:g}")
+    if args.output_noise < 0 or args.input_noise < 0:
+        raise HelmetAncError("noise levels must be non-negative")
+    files = write_session(simulate_session(spec), args.outdir)
+    print(f"wrote {', '.join(str(p) for p in files.values())}")
+    return 0

@@ -1,0 +1,160 @@
+"""Numerics of single-input single-output discrete-time state-space systems.
+
+The state-space convention is x(t+1) = A x(t) + B u(t), y(t) = C x(t) + D u(t)
+(seed appendix A). Frequency responses and simulations go through the modal
+(eigenvector) form, which turns an order-n system into n independent first-order
+recursions; that is exact, vectorises over frequencies and time, and avoids the
+high-order polynomials that the seed's appendix shows to be numerically unsafe.
+When A is close to defective (ill-conditioned eigenvectors) the slower but always
+well-posed direct forms are used instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+__all__ = [
+    "ModalForm",
+    "modal_form",
+    "frequency_response",
+    "simulate",
+    "invariant_zeros",
+    "spectral_radius",
+    "real_block_diagonal",
+]
+
+# Above this eigenvector condition number the modal form loses more than about
+# half of double precision; the direct forms are used instead.
+_MAX_MODAL_CONDITION = 1e8
+
+
+@dataclass(frozen=True)
+class ModalForm:
+    """G(z) = D + sum_i residues[i] / (z - poles[i]) with residues = (C V)_i (V^-1 B)_i."""
+
+    poles: np.ndarray
+    residues: np.ndarray
+    d: float
+    condition: float
+
+    @property
+    def reliable(self) -> bool:
+        return bool(np.isfinite(self.condition) and self.condition < _MAX_MODAL_CONDITION)
+
+
+def _as_siso(A, B, C, D):
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    n = A.shape[0]
+    B = np.asarray(B, dtype=float).reshape(n, 1) if n else np.zeros((0, 1))
+    C = np.asarray(C, dtype=float).reshape(1, n) if n else np.zeros((1, 0))
+    D = float(np.asarray(D, dtype=float).reshape(-1)[0])
+    return A, B, C, D
+
+
+def modal_form(A, B, C, D) -> ModalForm:
+    """Partial-fraction (modal) form of a SISO state-space system."""
+    A, B, C, D = _as_siso(A, B, C, D)
+    if A.shape[0] == 0:
+        return ModalForm(np.zeros(0, complex), np.zeros(0, complex), D, 1.0)
+    poles, V = np.linalg.eig(A)
+    condition = np.linalg.cond(V)
+    if not np.isfinite(condition) or condition > 1e15:
+        return ModalForm(poles, np.full_like(poles, np.nan), D, np.inf)
+    b_modal = np.linalg.solve(V, B[:, 0].astype(complex))
+    c_modal = C[0].astype(complex) @ V
+    return ModalForm(poles, c_modal * b_modal, D, float(condition))
+
+
+def frequency_response(A, B, C, D, z: np.ndarray) -> np.ndarray:
+    """G(z) = C (zI - A)^-1 B + D at the complex points z (usually e^{j omega})."""
+    A, B, C, D = _as_siso(A, B, C, D)
+    z = np.asarray(z, dtype=complex)
+    modal = modal_form(A, B, C, D)
+    if modal.reliable:
+        return D + (modal.residues[None, :] / (z.reshape(-1, 1) - modal.poles[None, :])).sum(axis=1).reshape(z.shape)
+    # Hessenberg reduction keeps the per-frequency solve well conditioned.
+    H, Q = scipy.linalg.hessenberg(A, calc_q=True)
+    b = Q.T @ B[:, 0]
+    c = C[0] @ Q
+    n = A.shape[0]
+    out = np.empty(z.size, dtype=complex)
+    for k, zk in enumerate(z.reshape(-1)):
+        out[k] = c @ np.linalg.solve(zk * np.eye(n) - H, b) + D
+    return out.reshape(z.shape)
+
+
+def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+    """Output y(t) of the system driven by u(t) from state x0 (zero by default)."""
+    A, B, C, D = _as_siso(A, B, C, D)
+    u = np.asarray(u, dtype=float)
+    n = A.shape[0]
+    if n == 0:
+        return D * u
+    x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
+    poles, V = np.linalg.eig(A)
+    condition = np.linalg.cond(V)
+    if np.isfinite(condition) and condition < _MAX_MODAL_CONDITION:
+        b_modal = np.linalg.solve(V, B[:, 0].astype(complex))
+        x0_modal = np.linalg.solve(V, x0.astype(complex))
+        c_modal = C[0].astype(complex) @ V
+        t = np.arange(u.size)
+        y = np.zeros(u.size, dtype=complex)
+        for p, b, c, x0_i in zip(poles, b_modal, c_modal, x0_modal):
+            # Mode i: x_i(t+1) = p x_i(t) + b_i u(t), a first-order IIR; conjugate
+            # modes add conjugate contributions, so the sum is real.
+            mode = scipy.signal.lfilter([0.0, b], [1.0, -p], u.astype(complex))
+            if x0_i != 0:
+                mode = mode + x0_i * p ** t
+            y += c * mode
+        return D * u + y.real
+    _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
+    return y[:, 0]
+
+
+def invariant_zeros(A, B, C, D) -> np.ndarray:
+    """Finite transmission zeros: generalised eigenvalues of the Rosenbrock pencil.
+
+    Solves [A B; C D] v = z [I 0; 0 0] v, which avoids forming the numerator
+    polynomial (rooting it loses the zeros of lightly damped high-order models).
+    """
+    A, B, C, D = _as_siso(A, B, C, D)
+    n = A.shape[0]
+    if n == 0:
+        return np.zeros(0, complex)
+    M = np.block([[A, B], [C, np.array([[D]])]])
+    N = np.zeros((n + 1, n + 1))
+    N[:n, :n] = np.eye(n)
+    values = scipy.linalg.eigvals(M, N)
+    finite = np.isfinite(values) & (np.abs(values) < 1e8)
+    return values[finite]
+
+
+def spectral_radius(A) -> float:
+    """Largest pole modulus max |eig(A)| (0 for a static system)."""
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    if A.shape[0] == 0:
+        return 0.0
+    return float(np.max(np.abs(np.linalg.eigvals(A))))
+
+
+def real_block_diagonal(poles: np.ndarray) -> np.ndarray:
+    """Real A matrix with the given (conjugate-closed) poles as 1x1 and 2x2 blocks."""
+    poles = np.asarray(poles, dtype=complex)
+    blocks = []
+    used = np.zeros(poles.size, dtype=bool)
+    for i, p in enumerate(poles):
+        if used[i]:
+            continue
+        used[i] = True
+        if abs(p.imag) < 1e-12 * max(1.0, abs(p)):
+            blocks.append(np.array([[p.real]]))
+            continue
+        candidates = np.where(~used)[0]
+        j = candidates[np.argmin(np.abs(poles[candidates] - np.conj(p)))]
+        used[j] = True
+        blocks.append(np.array([[p.real, p.imag], [-p.imag, p.real]]))
+    return scipy.linalg.block_diag(*blocks) if blocks else np.zeros((0, 0))

@@ -1,0 +1,281 @@
+"""The helmet-anc model of one sound path and its JSON file (format helmet-anc/model@1).
+
+A model is the chain  u -> [static input polynomial] -> [z^-delay] -> (A, B, C, D) -> y
+at one sample rate, optionally with a disturbance model (sinusoids at given
+frequencies) that explains part of a measured ear signal but is not part of the
+plant. ``history`` records every refinement; ``identification`` how the model was
+obtained (estimator, gamma, order, validation figures).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import lti
+from .errors import ModelError
+
+__all__ = ["Model", "MODEL_FORMAT", "PATHS", "atomic_write_text"]
+
+MODEL_FORMAT = "helmet-anc/model@1"
+PATHS = ("fb", "ff")
+_REQUIRED_KEYS = ("format", "path", "fs", "A", "B", "C", "D")
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write text to path through a temporary file in the same folder, then rename.
+
+    A failure part-way leaves any previous file untouched and no partial file behind.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise ModelError(f"{path}: folder {folder} does not exist")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=folder)
+    except OSError as exc:
+        raise ModelError(f"{path}: cannot write here ({exc.strerror})") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{name} matrix is not numeric") from None
+    if array.ndim == 0 and shape == (1, 1):
+        array = array.reshape(1, 1)
+    if array.size == 0 and 0 in shape:
+        return np.zeros(shape)
+    if array.ndim != 2 or array.shape != shape:
+        raise ModelError(f"Incompatible dimensions of {name} matrix; expected {shape} but found {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ModelError(f"{name} matrix has non-finite entries")
+    return array
+
+
+@dataclass
+class Model:
+    """One identified sound path; see the module docstring for the signal chain.
+
+    A, B, C, D are real arrays of shapes (n, n), (n, 1), (1, n), (1, 1) for
+    x(t+1) = A x(t) + B v(t - delay), y(t) = C x(t) + D v(t - delay), where
+    v = sum_k a_k u^k is the input polynomial (v = u when there is none). Units:
+    full-scale signal units in and out, ``fs`` in Hz, ``delay`` in samples.
+    """
+
+    path: str
+    fs: float
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    delay: int = 0
+    input_nonlinearity: list[float] | None = None
+    disturbance_frequencies: list[float] | None = None
+    history: list[dict] = field(default_factory=list)
+    identification: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.path not in PATHS:
+            raise ModelError(f"path must be one of {', '.join(PATHS)}; found {self.path!r}")
+        try:
+            self.fs = float(self.fs)
+        except (TypeError, ValueError):
+            raise ModelError(f"fs must be a number; found {self.fs!r}") from None
+        if not (math.isfinite(self.fs) and self.fs > 0):
+            raise ModelError(f"fs must be a positive sample rate in Hz; found {self.fs}")
+        A = np.atleast_2d(np.asarray(self.A, dtype=float)) if np.size(self.A) else np.zeros((0, 0))
+        n = A.shape[0]
+        self.A = _matrix(A, "A", (n, n))
+        self.B = _matrix(np.asarray(self.B, dtype=float).reshape(-1, 1) if np.size(self.B) else np.zeros((n, 1)), "B", (n, 1))
+        self.C = _matrix(np.asarray(self.C, dtype=float).reshape(1, -1) if np.size(self.C) else np.zeros((1, n)), "C", (1, n))
+        self.D = _matrix(self.D, "D", (1, 1))
+        if int(self.delay) != self.delay or self.delay < 0:
+            raise ModelError(f"delay must be a non-negative whole number of samples; found {self.delay!r}")
+        self.delay = int(self.delay)
+        if self.input_nonlinearity is not None:
+            coefficients = np.asarray(self.input_nonlinearity, dtype=float).reshape(-1)
+            if coefficients.size == 0 or not np.all(np.isfinite(coefficients)):
+                raise ModelError("input_nonlinearity needs finite coefficients [a1, a2, ...]")
+            self.input_nonlinearity = [float(c) for c in coefficients]
+        if self.disturbance_frequencies is not None:
+            frequencies = np.asarray(self.disturbance_frequencies, dtype=float).reshape(-1)
+            if np.any(~np.isfinite(frequencies)) or np.any(frequencies <= 0) or np.any(frequencies >= self.fs / 2):
+                raise ModelError("disturbance frequencies must lie between 0 and fs/2")
+            self.disturbance_frequencies = [float(f) for f in frequencies]
+
+    # -- properties -------------------------------------------------------------
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def spectral_radius(self) -> float:
+        """Largest pole modulus; the stability margin is 1 - spectral_radius."""
+        return lti.spectral_radius(self.A)
+
+    @property
+    def stable(self) -> bool:
+        return self.spectral_radius < 1.0
+
+    def poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
+
+    def zeros(self) -> np.ndarray:
+        """Finite zeros of the LTI core (the delay adds `delay` poles at the origin)."""
+        return lti.invariant_zeros(self.A, self.B, self.C, self.D)
+
+    # -- behaviour --------------------------------------------------------------
+    def frequency_response(self, frequencies_hz) -> np.ndarray:
+        """Complex response of the linear part (delay included) at frequencies in Hz.
+
+        The input polynomial contributes its linear coefficient a1 (the small-signal gain).
+        """
+        f = np.asarray(frequencies_hz, dtype=float)
+        z = np.exp(2j * np.pi * f / self.fs)
+        response = lti.frequency_response(self.A, self.B, self.C, self.D, z) * z ** (-self.delay)
+        if self.input_nonlinearity is not None:
+            response = response * self.input_nonlinearity[0]
+        return response
+
+    def apply_input_nonlinearity(self, u: np.ndarray) -> np.ndarray:
+        """v = a1 u + a2 u^2 + ... (identity when the model has no input polynomial)."""
+        u = np.asarray(u, dtype=float)
+        if self.input_nonlinearity is None:
+            return u
+        v = np.zeros_like(u)
+        for k, a in enumerate(self.input_nonlinearity, start=1):
+            v += a * u**k
+        return v
+
+    def simulate(self, u: np.ndarray) -> np.ndarray:
+        """Predicted ear signal for input u (full-scale units), from rest."""
+        v = self.apply_input_nonlinearity(u)
+        if self.delay:
+            v = np.concatenate((np.zeros(min(self.delay, v.size)), v[: max(v.size - self.delay, 0)]))
+        return lti.simulate(self.A, self.B, self.C, self.D, v)
+
+    # -- conversions ------------------------------------------------------------
+    def to_statespace(self):
+        """python-control StateSpace of the LTI core with the delay as extra states."""
+        import control
+
+        A, B, C, D = self.A, self.B, self.C, self.D
+        if self.delay:
+            # A chain of `delay` unit delays in front of the core.
+            d = self.delay
+            shift = np.eye(d, k=-1)
+            A = np.block([[shift, np.zeros((d, self.order))], [B @ np.eye(1, d, d - 1), A]])
+            B = np.vstack([np.eye(d, 1), np.zeros((self.order, 1))])
+            C = np.hstack([D @ np.eye(1, d, d - 1), C])
+            D = np.zeros((1, 1))
+        return control.ss(A, B, C, D, 1.0 / self.fs)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": MODEL_FORMAT,
+            "path": self.path,
+            "fs": self.fs,
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "delay": self.delay,
+            "input_nonlinearity": None if self.input_nonlinearity is None else {"coefficients": list(self.input_nonlinearity)},
+            "disturbance": None if self.disturbance_frequencies is None else {"frequencies": list(self.disturbance_frequencies)},
+            "stable": self.stable,
+            "history": list(self.history),
+            "identification": dict(self.identification),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Model":
+        if not isinstance(data, dict):
+            raise ModelError("model must be a JSON object")
+        missing = [key for key in _REQUIRED_KEYS if key not in data]
+        if missing:
+            raise ModelError(f"model is missing key(s): {', '.join(missing)}")
+        if data["format"] != MODEL_FORMAT:
+            raise ModelError(f"model format must be {MODEL_FORMAT!r}; found {data['format']!r}")
+        nonlinearity = data.get("input_nonlinearity")
+        if nonlinearity is not None:
+            if not isinstance(nonlinearity, dict) or "coefficients" not in nonlinearity:
+                raise ModelError("input_nonlinearity must be null or {\"coefficients\": [...]}")
+            nonlinearity = nonlinearity["coefficients"]
+        disturbance = data.get("disturbance")
+        if disturbance is not None:
+            if not isinstance(disturbance, dict) or "frequencies" not in disturbance:
+                raise ModelError("disturbance must be null or {\"frequencies\": [...]}")
+            disturbance = disturbance["frequencies"]
+        history = data.get("history", [])
+        identification = data.get("identification", {})
+        if not isinstance(history, list) or not isinstance(identification, dict):
+            raise ModelError("history must be a list and identification an object")
+        return cls(
+            path=data["path"],
+            fs=data["fs"],
+            A=data["A"],
+            B=data["B"],
+            C=data["C"],
+            D=data["D"],
+            delay=data.get("delay", 0),
+            input_nonlinearity=nonlinearity,
+            disturbance_frequencies=disturbance,
+            history=history,
+            identification=identification,
+        )
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the model as JSON atomically."""
+        atomic_write_text(path, self.to_json())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Model":
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ModelError(f"{path}: cannot read model ({exc.strerror})") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ModelError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        try:
+            return cls.from_dict(data)
+        except ModelError as exc:
+            raise ModelError(f"{path}: {exc}") from None
+
+    def save_mat(self, path: str | os.PathLike) -> None:
+        """Export A, B, C, D, Ts (s), delay (samples) and path for MATLAB (.mat, v5)."""
+        import scipy.io
+
+        folder = Path(path).parent
+        fd, tmp = tempfile.mkstemp(prefix=".model.", suffix=".mat", dir=folder if str(folder) else ".")
+        os.close(fd)
+        try:
+            scipy.io.savemat(
+                tmp,
+                {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "Ts": 1.0 / self.fs,
+                 "fs": self.fs, "delay": float(self.delay), "path": self.path},
+            )
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise

@@ -1,0 +1,165 @@
+"""Output-error refinement of a model against the raw DFT of the noise recording.
+
+The seed's pipeline fits smoothed FRF samples, and smoothing is biased at lightly
+damped modes (design.md, identification step 5). This step fits the raw data
+instead. For one block of L samples with DFTs U_k, Y_k at z_k = e^{j 2 pi k / L}
+the state equation gives exactly (McKelvey, "Frequency domain identification
+methods", Circuits Systems Signal Process. 21(1), 2002, eq. 7)
+
+    Y_k = [C (z_k I - A)^-1 B + D] z_k^-d U_k + C (z_k I - A)^-1 z_k x_delta + V_k,
+
+where x_delta = x(0) - x(L) is the block's transient and V_k the output noise. With
+A in real block-diagonal (modal) form and C = [1 0 | 1 0 | 1 ...], everything but
+the poles enters linearly (B, D, x_delta), so the poles are found by variable
+projection (Golub & Pereyra 1973): minimise over the poles the residual of the
+linear least-squares problem in the rest,
+
+    V(poles) = min_{B, D, x_delta} sum_k |Y_k - model_k|^2,
+
+the maximum-likelihood criterion for white output noise. Poles are parametrised so
+that every iterate is stable: a complex pair as r e^{+-j theta} with
+r = exp(-exp(sigma)), a real pole as tanh(xi).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+from threadpoolctl import threadpool_limits
+
+from . import lti
+from .errors import IdentificationError
+from .recordings import Recording
+
+__all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis"]
+
+
+@dataclass
+class BlockData:
+    """DFT bins of one data block inside the band: z_k, U_k, Y_k, and the block length."""
+
+    z: np.ndarray
+    U: np.ndarray
+    Y: np.ndarray
+    length: int
+    fs: float
+
+
+def block_data(noise: Recording, band=(20.0, 5000.0), max_seconds: float | None = 10.0) -> BlockData:
+    """The band's DFT bins of (at most max_seconds of) a noise recording after its transient."""
+    n = noise.u.size if max_seconds is None else min(noise.u.size, int(round(max_seconds * noise.fs)))
+    if n < 16:
+        raise IdentificationError(f"{noise.path}: too short for output-error refinement")
+    f = np.fft.rfftfreq(n, 1 / noise.fs)
+    inside = (f >= band[0]) & (f <= band[1])
+    u = noise.u[:n] - noise.u[:n].mean()
+    y = noise.y[:n] - noise.y[:n].mean()
+    return BlockData(np.exp(2j * np.pi * f[inside] / noise.fs), np.fft.rfft(u)[inside], np.fft.rfft(y)[inside], n, noise.fs)
+
+
+def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Columns C (zI - A)^-1 e_j for a real block-diagonal A (M x n), in closed form per block."""
+    n = A_block.shape[0]
+    basis = np.zeros((z.size, n), dtype=complex)
+    i = 0
+    while i < n:
+        if i + 1 < n and A_block[i, i + 1] != 0:
+            a, b = A_block[i, i], A_block[i, i + 1]
+            # (zI - [[a, b], [-b, a]])^-1 = [[z - a, b], [-b, z - a]] / ((z - a)^2 + b^2)
+            den = (z - a) ** 2 + b**2
+            c0, c1 = C[0, i], C[0, i + 1]
+            basis[:, i] = (c0 * (z - a) - c1 * b) / den
+            basis[:, i + 1] = (c0 * b + c1 * (z - a)) / den
+            i += 2
+        else:
+            basis[:, i] = C[0, i] / (z - A_block[i, i])
+            i += 1
+    return basis
+
+
+def _poles_to_params(poles: np.ndarray) -> tuple[np.ndarray, int]:
+    """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole)."""
+    pairs = [p for p in poles if p.imag > 1e-12]
+    reals = [p.real for p in poles if abs(p.imag) <= 1e-12]
+    params = []
+    for p in pairs:
+        r = min(abs(p), 1 - 1e-12)
+        params += [np.log(-np.log(r)), np.angle(p)]
+    params += [np.arctanh(np.clip(p, -1 + 1e-12, 1 - 1e-12)) for p in reals]
+    return np.array(params, dtype=float), len(pairs)
+
+
+def _params_to_poles(params: np.ndarray, pairs: int) -> np.ndarray:
+    sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
+    r = np.exp(-np.exp(sigma))
+    upper = r * np.exp(1j * theta)
+    return np.concatenate([upper, np.conj(upper), np.tanh(params[2 * pairs:]).astype(complex)])
+
+
+@dataclass
+class OutputErrorFit:
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    cost_before: float
+    cost_after: float
+    iterations: int
+
+
+class _Problem:
+    def __init__(self, data: BlockData, delay: int, feedthrough: bool, input_weight: np.ndarray | None = None):
+        self.data, self.feedthrough = data, feedthrough
+        self.u_delayed = data.U * data.z ** (-delay)
+
+    def linear(self, poles):
+        A = lti.real_block_diagonal(poles)
+        C = _output_row(A)
+        basis = modal_basis(A, C, self.data.z)
+        columns = [basis * self.u_delayed[:, None], basis * self.data.z[:, None]]
+        if self.feedthrough:
+            columns.append(self.u_delayed[:, None])
+        regressor = np.hstack(columns)
+        real = np.vstack([regressor.real, regressor.imag])
+        rhs = np.concatenate([self.data.Y.real, self.data.Y.imag])
+        # Column scaling keeps the solve well conditioned when modes differ by decades.
+        scale = np.linalg.norm(real, axis=0)
+        scale[scale == 0] = 1.0
+        theta, *_ = np.linalg.lstsq(real / scale, rhs, rcond=None)
+        theta /= scale
+        residual = rhs - real @ theta
+        return A, C, theta, residual
+
+
+def _output_row(A_block):
+    from .subspace import _block_output_row
+
+    return _block_output_row(A_block)
+
+
+def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
+                        max_iterations: int = 60) -> OutputErrorFit:
+    """Refine a stable model's poles and zeros on raw DFT data; see the module docstring."""
+    poles = np.linalg.eigvals(np.asarray(A, dtype=float))
+    if poles.size == 0:
+        raise IdentificationError("output-error refinement needs a model of order at least 1")
+    if np.max(np.abs(poles)) >= 1:
+        raise IdentificationError("output-error refinement needs a stable starting model")
+    params, pairs = _poles_to_params(poles)
+    problem = _Problem(data, delay, feedthrough)
+
+    def residual(x):
+        return problem.linear(_params_to_poles(x, pairs))[3]
+
+    start = residual(params)
+    # least_squares' "lm" counts iterations in max_nfev (its Jacobian calls come on top).
+    with threadpool_limits(limits=1, user_api="blas"):
+        result = scipy.optimize.least_squares(residual, params, method="lm", x_scale="jac", max_nfev=max_iterations)
+    x = result.x if np.sum(result.fun**2) <= np.sum(start**2) else params
+    A_new, C_new, theta, final = problem.linear(_params_to_poles(x, pairs))
+    n = A_new.shape[0]
+    B_new = theta[:n].reshape(n, 1)
+    D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])
+    return OutputErrorFit(A_new, B_new, C_new, D_new, float(np.sum(start**2)), float(np.sum(final**2)), int(result.nfev))

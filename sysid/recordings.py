@@ -1,0 +1,160 @@
+"""Stereo WAV recordings of one sound path, loaded and checked against the input contract.
+
+Channel 0 is the path input (headphone drive voltage for FB, chin microphone for FF)
+and channel 1 the ear-canal microphone, unless overridden. Samples are scaled to
+full-scale units in [-1, 1): 16-bit PCM by 2^-15, 24/32-bit PCM (which scipy returns
+left-justified in int32) by 2^-31, 8-bit unsigned PCM by (x - 128)/128, float as is.
+Anything unusable raises RecordingError with a one-line message naming the file;
+clipping and a DC offset are reported (a RecordingWarning and the fields
+``clipped_fraction`` and ``dc_offset``) because the diagnosis explains them.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.io.wavfile
+
+from .errors import RecordingError
+
+__all__ = ["Recording", "RecordingWarning", "load_recording", "check_same_rate", "write_wav16", "recording_from_arrays"]
+
+# A DC offset worth reporting: a mean above this fraction of the channel's RMS and
+# above a few 16-bit LSB (3e-5 FS each).
+_DC_RELATIVE = 0.02
+_DC_ABSOLUTE = 1e-4
+# Fewer consecutive-or-not rail samples than this are taken as legitimate peaks.
+_CLIP_MIN_SAMPLES = 3
+
+
+class RecordingWarning(UserWarning):
+    """A recording is usable but has a data-quality problem (clipping, DC offset)."""
+
+
+@dataclass
+class Recording:
+    """One stereo recording: input u and ear signal y in full-scale units at fs Hz."""
+
+    u: np.ndarray
+    y: np.ndarray
+    fs: float
+    path: str = "<array>"
+    clipped_fraction: tuple[float, float] = (0.0, 0.0)
+    dc_offset: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def duration(self) -> float:
+        return self.u.size / self.fs
+
+    def trimmed(self, start_s: float) -> "Recording":
+        """The recording without its first start_s seconds (e.g. the 3 s noise transient)."""
+        first = int(round(start_s * self.fs))
+        return Recording(self.u[first:], self.y[first:], self.fs, self.path, self.clipped_fraction, self.dc_offset)
+
+
+def _to_full_scale(data: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Float samples in [-1, 1) and the rail values (lowest, highest) of the format."""
+    if data.dtype == np.int16:
+        return data / 32768.0, -1.0, 32767 / 32768.0
+    if data.dtype == np.int32:
+        return data / 2147483648.0, -1.0, 2147483392 / 2147483648.0
+    if data.dtype == np.uint8:
+        return (data.astype(float) - 128.0) / 128.0, -1.0, 127 / 128.0
+    if data.dtype.kind == "f":
+        return data.astype(float), -1.0, 1.0
+    raise RecordingError(f"unsupported sample format {data.dtype}")
+
+
+def _check_samples(name: str, u: np.ndarray, y: np.ndarray) -> None:
+    for label, x in (("input", u), ("output", y)):
+        if not np.all(np.isfinite(x)):
+            raise RecordingError(f"{name}: {label} channel has NaN or infinite samples")
+    if u.size == 0:
+        raise RecordingError(f"{name}: recording has no samples")
+    if not np.any(u):
+        raise RecordingError(f"{name}: input channel is silent (all samples zero)")
+
+
+def _quality(name: str, u: np.ndarray, y: np.ndarray, rails: tuple[float, float]) -> tuple[tuple, tuple]:
+    low, high = rails
+    clipped = []
+    offsets = []
+    for label, x in (("input", u), ("output", y)):
+        at_rail = int(np.count_nonzero((x <= low) | (x >= high)))
+        fraction = at_rail / x.size if at_rail >= _CLIP_MIN_SAMPLES else 0.0
+        clipped.append(fraction)
+        if fraction:
+            warnings.warn(f"{name}: {label} channel clipped on {100 * fraction:.3g} % of samples", RecordingWarning, stacklevel=3)
+        mean = float(np.mean(x))
+        rms = float(np.sqrt(np.mean((x - mean) ** 2)))
+        significant = abs(mean) > _DC_ABSOLUTE and abs(mean) > _DC_RELATIVE * rms
+        offsets.append(mean if significant else 0.0)
+        if significant:
+            warnings.warn(f"{name}: {label} channel has a DC offset of {mean:.3g} FS", RecordingWarning, stacklevel=3)
+    return tuple(clipped), tuple(offsets)
+
+
+def load_recording(path, input_channel: int = 0, output_channel: int = 1) -> Recording:
+    """Load a stereo WAV file as a Recording (see the module docstring for scaling)."""
+    name = str(path)
+    if not Path(path).is_file():
+        raise RecordingError(f"{name}: no such file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", scipy.io.wavfile.WavFileWarning)
+            fs, data = scipy.io.wavfile.read(path)
+    except Exception as exc:  # scipy raises several types (and some internal ones) on corrupt files
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise RecordingError(f"{name}: not a readable WAV file ({reason})") from None
+    if data.ndim == 1:
+        raise RecordingError(f"{name}: mono file; expected 2 channels (input, ear microphone)")
+    channels = data.shape[1]
+    for label, index in (("input", input_channel), ("output", output_channel)):
+        if not 0 <= index < channels:
+            raise RecordingError(f"{name}: {label} channel {index} does not exist (file has {channels} channels)")
+    if input_channel == output_channel:
+        raise RecordingError(f"{name}: input and output channel are both {input_channel}")
+    try:
+        scaled, low, high = _to_full_scale(data)
+    except RecordingError as exc:
+        raise RecordingError(f"{name}: {exc}") from None
+    u = np.ascontiguousarray(scaled[:, input_channel], dtype=float)
+    y = np.ascontiguousarray(scaled[:, output_channel], dtype=float)
+    _check_samples(name, u, y)
+    clipped, offsets = _quality(name, u, y, (low, high))
+    return Recording(u, y, float(fs), name, clipped, offsets)
+
+
+def recording_from_arrays(u, y, fs: float, name: str = "<array>") -> Recording:
+    """A Recording from numpy arrays (full-scale units), with the same checks as a file."""
+    u = np.asarray(u, dtype=float).reshape(-1)
+    y = np.asarray(y, dtype=float).reshape(-1)
+    if u.size != y.size:
+        raise RecordingError(f"{name}: input has {u.size} samples but output has {y.size}")
+    if not (np.isfinite(fs) and fs > 0):
+        raise RecordingError(f"{name}: sample rate must be positive; found {fs}")
+    _check_samples(name, u, y)
+    clipped, offsets = _quality(name, u, y, (-1.0, 32767 / 32768.0))
+    return Recording(u, y, float(fs), name, clipped, offsets)
+
+
+def check_same_rate(recordings) -> float:
+    """The common sample rate of the recordings; a mismatch is an error, never a resample."""
+    recordings = list(recordings)
+    fs = recordings[0].fs
+    for recording in recordings[1:]:
+        if recording.fs != fs:
+            raise RecordingError(
+                f"{recording.path}: sample rate {recording.fs:g} Hz differs from {fs:g} Hz of {recordings[0].path}"
+            )
+    return fs
+
+
+def write_wav16(path, u: np.ndarray, y: np.ndarray, fs: float) -> None:
+    """Write a stereo 16-bit PCM WAV (channel 0 = u, channel 1 = y), rounding and saturating."""
+    stereo = np.stack([u, y], axis=1) * 32768.0
+    pcm = np.clip(np.round(stereo), -32768, 32767).astype(np.int16)
+    scipy.io.wavfile.write(path, int(round(fs)), pcm)

@@ -1,0 +1,149 @@
+"""Non-parametric frequency-response estimates from a noise recording (seed chapter 3).
+
+Two estimators of the input/output spectra on the N-point grid f_n = n fs / N,
+N = fs / f_min (2205 at 44.1 kHz for f_min = 20 Hz, seed section 3.1):
+
+* ``seed-average`` (seed eqs. 3.2-3.3): the DFTs of the N_s non-overlapping segments
+  are averaged first, U_av = mean_i U_i, Y_av = mean_i Y_i, and G_E = Y_av / U_av.
+  Segment transients telescope so leakage cancels, but averaging the DFTs of
+  independent noise segments averages the *signal* towards zero as fast as the
+  noise: the output-noise error does not fall with N_s.
+* ``h1`` (default): Welch averages of the cross and auto spectra (Hann window, 50 %
+  overlap), H1 = S_yu / S_uu, H2 = S_yy / S_uy and the coherence
+  gamma^2 = |S_yu|^2 / (S_uu S_yy). H1 is unbiased for output noise and biased low
+  by 1 / (1 + S_nn/S_uu) for input noise; H2 is biased high; H1 != H2 flags
+  errors-in-variables.
+
+Cross-spectrum convention: S_yu(f) = E[Y(f) conj(U(f))] (Ljung's Phi_yu), which is
+what ``scipy.signal.csd(u, y)`` returns (it conjugates its *first* argument).
+
+Smoothing (seed section 3.2, corrected): Blackman-Tukey, i.e. the spectra's inverse
+DFT (correlation estimates R(k)) times Ljung's Parzen lag window of width gamma,
+transformed back:
+    w(k) = 1 - 6 (k/g)^2 + 6 |k/g|^3   for |k| <= g/2,
+           2 (1 - |k|/g)^3              for g/2 < |k| <= g,
+           0                            otherwise
+(Ljung, System Identification, 2nd ed., table 6.1). The seed's printed frequency
+window has numerator and denominator swapped; it is not used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from .errors import IdentificationError
+from .recordings import Recording
+
+__all__ = [
+    "ESTIMATORS",
+    "Spectra",
+    "FrequencyResponse",
+    "segment_length",
+    "estimate_spectra",
+    "parzen_lag_window",
+    "smooth_spectra",
+    "smoothed_response",
+    "response",
+]
+
+ESTIMATORS = ("h1", "seed-average")
+
+
+def segment_length(fs: float, f_min: float = 20.0) -> int:
+    """N = fs / f_min samples, so that the DFT grid step equals f_min (seed section 3.1)."""
+    return int(round(fs / f_min))
+
+
+@dataclass
+class Spectra:
+    """One-sided spectra on the grid f = n fs / N, n = 0..N//2 (units FS^2 per bin)."""
+
+    fs: float
+    nperseg: int
+    s_uu: np.ndarray
+    s_yu: np.ndarray
+    s_yy: np.ndarray
+    estimator: str
+    segments: int
+
+    @property
+    def frequencies(self) -> np.ndarray:
+        return np.arange(self.s_uu.size) * self.fs / self.nperseg
+
+
+@dataclass
+class FrequencyResponse:
+    """FRF samples at ``frequencies`` (Hz): H1 estimate ``g``, H2 and coherence (squared)."""
+
+    frequencies: np.ndarray
+    g: np.ndarray
+    h2: np.ndarray
+    coherence: np.ndarray
+
+
+def estimate_spectra(noise: Recording, estimator: str = "h1", nperseg: int | None = None) -> Spectra:
+    """Input/output spectra of a noise recording (transient already removed) by ``estimator``."""
+    if estimator not in ESTIMATORS:
+        raise IdentificationError(f"estimator must be one of {', '.join(ESTIMATORS)}; found {estimator!r}")
+    nperseg = nperseg or segment_length(noise.fs)
+    segments = noise.u.size // nperseg
+    if segments < 1:
+        raise IdentificationError(
+            f"{noise.path}: {noise.u.size / noise.fs:.3g} s after the transient is shorter than one "
+            f"averaging segment of {nperseg / noise.fs:.3g} s"
+        )
+    u = noise.u - noise.u.mean()
+    y = noise.y - noise.y.mean()
+    if estimator == "seed-average":
+        used = segments * nperseg
+        U = np.fft.rfft(u[:used].reshape(segments, nperseg), axis=1).mean(axis=0) / nperseg
+        Y = np.fft.rfft(y[:used].reshape(segments, nperseg), axis=1).mean(axis=0) / nperseg
+        return Spectra(noise.fs, nperseg, np.abs(U) ** 2, Y * np.conj(U), np.abs(Y) ** 2, estimator, segments)
+    options = dict(fs=noise.fs, window="hann", nperseg=nperseg, noverlap=nperseg // 2, detrend=False, scaling="spectrum")
+    _, s_uu = scipy.signal.welch(u, **options)
+    _, s_yy = scipy.signal.welch(y, **options)
+    _, s_yu = scipy.signal.csd(u, y, **options)
+    return Spectra(noise.fs, nperseg, s_uu, s_yu, s_yy, estimator, 2 * segments - 1)
+
+
+def response(spectra: Spectra, band: tuple[float, float]) -> FrequencyResponse:
+    """H1, H2 and squared coherence at the grid frequencies inside band (Hz, inclusive)."""
+    f = spectra.frequencies
+    inside = (f >= band[0]) & (f <= band[1])
+    s_uu, s_yu, s_yy = spectra.s_uu[inside], spectra.s_yu[inside], spectra.s_yy[inside]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h1 = s_yu / s_uu
+        h2 = s_yy / np.conj(s_yu)
+        coherence = np.abs(s_yu) ** 2 / (s_uu * s_yy)
+    return FrequencyResponse(f[inside], h1, h2, np.clip(np.nan_to_num(coherence), 0.0, 1.0))
+
+
+def parzen_lag_window(gamma: int, n: int) -> np.ndarray:
+    """Ljung's Parzen lag window w_gamma(k) for the circular lags k = 0..n-1 (k and n-k alike)."""
+    if gamma < 1:
+        raise IdentificationError(f"smoothing width gamma must be at least 1; found {gamma}")
+    k = np.minimum(np.arange(n), n - np.arange(n)) / gamma
+    return np.where(k <= 0.5, 1 - 6 * k**2 + 6 * k**3, np.where(k <= 1.0, 2 * (1 - k) ** 3, 0.0))
+
+
+def smooth_spectra(spectra: Spectra, gamma: int) -> Spectra:
+    """Blackman-Tukey smoothing of all three spectra with the Parzen lag window of width gamma."""
+    n = spectra.nperseg
+    if gamma > n // 2:
+        raise IdentificationError(f"smoothing width gamma={gamma} exceeds half the segment length ({n // 2} samples)")
+    window = parzen_lag_window(gamma, n)
+
+    def smooth(s):
+        return np.fft.rfft(np.fft.irfft(s, n) * window)
+
+    s_uu = smooth(spectra.s_uu).real
+    s_yy = smooth(spectra.s_yy).real
+    return Spectra(spectra.fs, n, s_uu, smooth(spectra.s_yu), s_yy, spectra.estimator, spectra.segments)
+
+
+def smoothed_response(spectra: Spectra, gamma: int, band: tuple[float, float]) -> FrequencyResponse:
+    """The smoothed FRF G_smooth = Phi_yu / Phi_u (seed eq. 3.8) inside band."""
+    return response(smooth_spectra(spectra, gamma), band)

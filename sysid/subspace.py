@@ -1,0 +1,184 @@
+"""Frequency-domain subspace identification from FRF samples (McKelvey, Akcay & Ljung 1996).
+
+Given samples G_k of a frequency response at arbitrary (non-uniform) normalised
+frequencies omega_k (rad/sample), k = 1..M, find a real order-n model
+G(z) = C (zI - A)^-1 B + D. Algorithm 2 of McKelvey, Akcay & Ljung, IEEE TAC 41(7),
+1996, pp. 960-979, which the seed (section 3.3.1) follows:
+
+1. Data matrices with q block rows, scaled by 1/sqrt(M):
+   G_q[i, k] = e^{j i omega_k} G_k and W_q[i, k] = e^{j i omega_k}, i = 0..q-1.
+2. Real QR (as an LQ factorisation) of [Re W_q, Im W_q; Re G_q, Im G_q] = L Q^T;
+   L22 carries the part of G_q orthogonal to the input rows.
+3. Noise weighting K K^T = Re(W_q diag(R_k) W_q^*) (R_k the variance of G_k; one
+   when unknown), SVD K^-1 L22 = U S V^T. The singular values S are the order plot.
+4. Extended observability matrix O = K U[:, :n]; C = first row, A from the shift
+   property O[1:] = O[:-1] A by least squares.
+5. B, D by linear least squares on sum_k |G_k - D - C (z_k I - A)^-1 B|^2 with
+   z_k = e^{j omega_k}, real and imaginary parts stacked.
+
+Steps 1-3 do not depend on n: ``SubspaceDecomposition`` does them once and gives
+every order from the same SVD.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from . import lti
+from .errors import IdentificationError
+
+__all__ = ["SubspaceDecomposition", "SubspaceFit", "subspace_fit", "fit_b_d", "stabilise"]
+
+
+@dataclass(frozen=True)
+class SubspaceFit:
+    """An order-n model from the subspace method and what was done to make it stable."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    stable: bool
+    stabilisation: str  # "none", "reflected k pole(s)", or "unstable (left as is)"
+
+
+def fit_b_d(A: np.ndarray, C: np.ndarray, omega: np.ndarray, g: np.ndarray, feedthrough: bool,
+            weights: np.ndarray | None = None, eig=None) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares B (n x 1) and D (1 x 1) for fixed A, C on FRF samples (step 5).
+
+    ``eig`` may pass a precomputed (poles, eigenvectors) of A.
+    """
+    n = A.shape[0]
+    z = np.exp(1j * omega)
+    phi = _observation_rows(A, C, z, eig)
+    columns = [phi] + ([np.ones((z.size, 1))] if feedthrough else [])
+    regressor = np.hstack(columns)
+    target = g.copy()
+    if weights is not None:
+        regressor = regressor * weights[:, None]
+        target = target * weights
+    real = np.vstack([regressor.real, regressor.imag])
+    rhs = np.concatenate([target.real, target.imag])
+    theta, *_ = np.linalg.lstsq(real, rhs, rcond=None)
+    B = theta[:n].reshape(n, 1)
+    D = np.array([[theta[n] if feedthrough else 0.0]])
+    return B, D
+
+
+def _observation_rows(A: np.ndarray, C: np.ndarray, z: np.ndarray, eig=None) -> np.ndarray:
+    """Rows C (z_k I - A)^-1 (M x n): by the eigenvectors of A, by solves if A is near-defective."""
+    n = A.shape[0]
+    poles, V = eig if eig is not None else np.linalg.eig(A)
+    condition = np.linalg.cond(V)
+    if np.isfinite(condition) and condition < 1e8:
+        return ((C[0] @ V)[None, :] / (z[:, None] - poles[None, :])) @ np.linalg.inv(V)
+    eye = np.eye(n)
+    return np.linalg.solve((z[:, None, None] * eye - A).transpose(0, 2, 1), np.broadcast_to(C[0], (z.size, n))[..., None])[..., 0]
+
+
+def stabilise(A, C, omega, g, feedthrough, method: str = "reflect", weights=None) -> SubspaceFit:
+    """Fit B, D for A, C; if A is unstable, handle it by ``method``.
+
+    'reflect': poles p with |p| >= 1 are replaced by 1/conj(p) (same magnitude
+    response shape up to a gain), the model is rebuilt in real block-diagonal form
+    and B, D are re-estimated by least squares. 'keep': return the unstable model,
+    flagged. 'reject': raise IdentificationError.
+    """
+    poles = np.linalg.eigvals(A) if A.shape[0] else np.zeros(0)
+    unstable = np.abs(poles) >= 1.0
+    if not np.any(unstable):
+        B, D = fit_b_d(A, C, omega, g, feedthrough, weights)
+        return SubspaceFit(A, B, C, D, True, "none")
+    if method == "keep":
+        B, D = fit_b_d(A, C, omega, g, feedthrough, weights)
+        return SubspaceFit(A, B, C, D, False, "unstable (left as is)")
+    if method == "reject":
+        raise IdentificationError(f"identified model is unstable (largest pole radius {np.abs(poles).max():.6f})")
+    if method != "reflect":
+        raise IdentificationError(f"stability method must be reflect, keep or reject; found {method!r}")
+    reflected = np.where(unstable, 1.0 / np.conj(poles), poles)
+    # A pole exactly on the unit circle stays there after reflection; pull it inside.
+    reflected = np.where(np.abs(reflected) >= 1.0, reflected * (1 - 1e-6) / np.abs(reflected), reflected)
+    A_new = lti.real_block_diagonal(reflected)
+    C_new = _block_output_row(A_new)
+    B, D = fit_b_d(A_new, C_new, omega, g, feedthrough, weights)
+    return SubspaceFit(A_new, B, C_new, D, True, f"reflected {int(unstable.sum())} pole(s) into the unit circle")
+
+
+def _block_output_row(A_block: np.ndarray) -> np.ndarray:
+    """C = [1 0 | 1 0 | 1 | ...]: observable for a real block-diagonal A with distinct poles."""
+    n = A_block.shape[0]
+    C = np.zeros((1, n))
+    i = 0
+    while i < n:
+        C[0, i] = 1.0
+        i += 2 if i + 1 < n and A_block[i, i + 1] != 0 else 1
+    return C
+
+
+class SubspaceDecomposition:
+    """Steps 1-3 of the algorithm for one set of FRF samples; ``fit(n)`` does steps 4-5."""
+
+    def __init__(self, omega, g, q: int = 30, noise_variance=None, feedthrough: bool = False):
+        omega = np.asarray(omega, dtype=float)
+        g = np.asarray(g, dtype=complex)
+        if omega.shape != g.shape or omega.ndim != 1:
+            raise IdentificationError("frequencies and FRF samples must be 1-D arrays of one length")
+        if not np.all(np.isfinite(g)):
+            raise IdentificationError("FRF samples contain NaN or infinite values")
+        if q < 2 or 2 * omega.size < q:
+            raise IdentificationError(f"need 2 <= q <= 2 M; found q={q} with M={omega.size} frequencies")
+        self.omega, self.g, self.q, self.feedthrough = omega, g, q, feedthrough
+        m = omega.size
+        # 1. Data matrices.
+        powers = np.exp(1j * np.outer(np.arange(q), omega)) / np.sqrt(m)
+        w_q = powers
+        g_q = powers * g[None, :]
+        # 2. LQ factorisation of the real stacked matrix, via QR of its transpose.
+        stacked = np.vstack([np.hstack([w_q.real, w_q.imag]), np.hstack([g_q.real, g_q.imag])])
+        r = scipy.linalg.qr(stacked.T, mode="r")[0]
+        l22 = r[q:2 * q, q:2 * q].T
+        # 3. Noise weighting and SVD.
+        variance = np.ones(m) if noise_variance is None else np.asarray(noise_variance, dtype=float)
+        self.weights = None if noise_variance is None else 1.0 / np.sqrt(variance)
+        kk = ((w_q * variance[None, :]) @ w_q.conj().T).real
+        self.k = np.linalg.cholesky(kk + 1e-12 * np.trace(kk) / q * np.eye(q))
+        u, s, _ = np.linalg.svd(scipy.linalg.solve_triangular(self.k, l22, lower=True))
+        self.singular_values = s
+        self._u = u
+
+    @property
+    def max_order(self) -> int:
+        return self.q - 1
+
+    def observability(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """A and C of order n (step 4)."""
+        if not 1 <= n <= self.max_order:
+            raise IdentificationError(f"order must be between 1 and q-1 = {self.max_order}; found {n}")
+        o = self.k @ self._u[:, :n]
+        A = np.linalg.lstsq(o[:-1], o[1:], rcond=None)[0]
+        return A, o[:1]
+
+    def fit_if_stable(self, n: int) -> SubspaceFit | None:
+        """The order-n model if its A is stable, else None (the seed's grid keeps stable models only)."""
+        A, C = self.observability(n)
+        poles, V = np.linalg.eig(A)
+        if np.max(np.abs(poles)) >= 1.0:
+            return None
+        B, D = fit_b_d(A, C, self.omega, self.g, self.feedthrough, self.weights, eig=(poles, V))
+        return SubspaceFit(A, B, C, D, True, "none")
+
+    def fit(self, n: int, stability: str = "reflect") -> SubspaceFit:
+        """The order-n model (steps 4-5) with stability handled by ``stability``."""
+        A, C = self.observability(n)
+        return stabilise(A, C, self.omega, self.g, self.feedthrough, stability, self.weights)
+
+
+def subspace_fit(omega, g, n: int, q: int | None = None, feedthrough: bool = False, stability: str = "reflect",
+                 noise_variance=None) -> SubspaceFit:
+    """One order-n fit to FRF samples g at omega (rad/sample); see the module docstring."""
+    q = q or max(2 * n + 2, 30)
+    return SubspaceDecomposition(omega, g, q, noise_variance, feedthrough).fit(n, stability)

@@ -1,0 +1,81 @@
+"""Identification of the seed's appendix-A plants from short simulated sessions."""
+
+import numpy as np
+import pytest
+
+from sysid.errors import IdentificationError, RecordingError
+from sysid.identify import IdentificationOptions, identify
+from sysid.recordings import Recording
+from sysid.validation import simulated_rms
+
+from conftest import FAST_OPTIONS
+
+BAND = np.linspace(20.0, 1500.0, 400)
+
+
+@pytest.mark.parametrize("path", ["fb", "ff"])
+class TestAppendixAPlants:
+    def test_model_is_stable(self, identifications, path):
+        model = identifications[path].model
+        assert model.stable
+        assert model.identification["rms"] > 0
+
+    def test_frequency_response_within_1_db_and_10_degrees(self, identifications, sessions, path):
+        model, plant = identifications[path].model, sessions[path].plant
+        ratio = model.frequency_response(BAND) / plant.frequency_response(BAND)
+        assert np.max(np.abs(20 * np.log10(np.abs(ratio)))) < 1.0
+        assert np.max(np.abs(np.angle(ratio, deg=True))) < 10.0
+
+    def test_validation_rms_within_10_percent_of_true_plant(self, identifications, sessions, path):
+        session = sessions[path]
+        true_rms = simulated_rms(session.plant, session.sweeps)
+        assert identifications[path].model.identification["rms"] <= 1.10 * true_rms
+
+    def test_refinement_beats_seed_grid_and_is_reported(self, identifications, path):
+        result = identifications[path]
+        assert result.refined_rms is not None and result.refined_rms < result.seed_rms
+        info = result.model.identification
+        assert info["seed_choice"]["rms"] == pytest.approx(result.seed_rms)
+        assert info["refined"] is True
+
+
+def test_grid_keeps_only_stable_candidates(identifications):
+    grid = identifications["fb"].grid
+    assert grid.rms.shape == (len(FAST_OPTIONS.gammas), 20)
+    assert grid.chosen.fit.stable
+    assert np.nanmin(grid.rms) == pytest.approx(min(c.rms for c in grid.best), rel=0.05)
+
+
+def test_seed_average_estimator_gives_a_stable_model(sessions):
+    session = sessions["ff"]
+    options = IdentificationOptions(estimator="seed-average", gammas=(90, 500), orders=(3, 4, 5, 6), refine=False)
+    result = identify(session.noise, session.sweeps, "ff", options)
+    assert result.model.stable
+    assert result.model.identification["estimator"] == "seed-average"
+    assert result.refined_rms is None
+
+
+def test_unknown_estimator_is_rejected(sessions):
+    session = sessions["ff"]
+    with pytest.raises(IdentificationError, match="estimator must be one of"):
+        identify(session.noise, session.sweeps, "ff", IdentificationOptions(estimator="h3"))
+
+
+def test_noise_recording_shorter_than_one_segment_is_rejected(sessions):
+    session = sessions["ff"]
+    short = Recording(session.noise.u[: int(3.02 * 44100)], session.noise.y[: int(3.02 * 44100)], 44100.0, "short.wav")
+    with pytest.raises(IdentificationError, match="short.wav.*shorter than one averaging segment"):
+        identify(short, session.sweeps, "ff", FAST_OPTIONS)
+
+
+def test_sample_rate_mismatch_is_rejected(sessions):
+    session = sessions["ff"]
+    other = Recording(session.sweeps[1].u, session.sweeps[1].y, 48000.0, "sweep48k.wav")
+    with pytest.raises(RecordingError, match="sweep48k.wav: sample rate 48000 Hz differs"):
+        identify(session.noise, [session.sweeps[0], other], "ff", FAST_OPTIONS)
+
+
+def test_gamma_beyond_half_segment_is_rejected(sessions):
+    session = sessions["ff"]
+    with pytest.raises(IdentificationError, match="exceeds half the segment length"):
+        identify(session.noise, session.sweeps, "ff", IdentificationOptions(gammas=(2000,)))

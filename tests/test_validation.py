@@ -1,0 +1,52 @@
+"""Validation rms, its compressed evaluation for the grid, and the sweeps' noise floor."""
+
+import numpy as np
+import pytest
+
+from sysid import lti
+from sysid.recordings import Recording
+from sysid.validation import (CompressedValidation, band_rms, noise_floor, rms_from_responses, simulated_rms,
+                              sweep_spectrum)
+
+
+def test_band_rms_of_a_sine_inside_and_outside_the_band():
+    fs = 44100.0
+    t = np.arange(44100) / fs
+    x = 0.3 * np.sin(2 * np.pi * 1000 * t) + 0.2 * np.sin(2 * np.pi * 10000 * t)
+    assert band_rms(x, fs, (20, 4000)) == pytest.approx(0.3 / np.sqrt(2), rel=1e-6)
+    assert band_rms(x, fs, (5000, 15000)) == pytest.approx(0.2 / np.sqrt(2), rel=1e-6)
+
+
+def test_true_plant_rms_is_the_output_noise_and_matches_the_noise_floor(sessions):
+    session = sessions["ff"]
+    floor = noise_floor(*session.sweeps)
+    true_rms = simulated_rms(session.plant, session.sweeps)
+    # White output noise of 2e-4 FS (plus quantisation) has this share in 20 Hz - 4 kHz:
+    expected = np.sqrt(2e-4**2 + (2**-15) ** 2 / 12) * np.sqrt((4000 - 20) / 22050)
+    assert floor == pytest.approx(expected, rel=0.05)
+    assert true_rms == pytest.approx(floor, rel=0.05)
+
+
+def test_noise_floor_aligns_repeats_recorded_with_an_offset(sessions):
+    a, b = sessions["ff"].sweeps
+    shifted = Recording(np.concatenate([np.zeros(300), b.u]), np.concatenate([np.zeros(300), b.y]), b.fs, "late.wav")
+    assert noise_floor(a, shifted) == pytest.approx(noise_floor(a, b), rel=0.02)
+
+
+def test_frequency_domain_rms_equals_time_domain_simulation(sessions):
+    session = sessions["fb"]
+    spectra = [sweep_spectrum(s) for s in session.sweeps]
+    responses = [session.plant.frequency_response(s.frequencies) for s in spectra]
+    assert rms_from_responses(spectra, responses) == pytest.approx(simulated_rms(session.plant, session.sweeps), rel=0.02)
+
+
+def test_compressed_validation_matches_exact_rms(sessions, rng):
+    session = sessions["ff"]
+    spectra = [sweep_spectrum(s) for s in session.sweeps]
+    compressed = CompressedValidation(spectra)
+    plant = session.plant
+    z = np.exp(2j * np.pi * compressed.frequencies / plant.fs)
+    for gain in (1.0, 1.01, 0.9):
+        coarse = gain * lti.frequency_response(plant.A, plant.B, plant.C, plant.D, z)
+        exact = rms_from_responses(spectra, [gain * plant.frequency_response(s.frequencies) for s in spectra])
+        assert compressed.rms(coarse[None, :])[0] == pytest.approx(exact, rel=1e-3)
