@@ -134,11 +134,10 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
             fit = decomposition.fit_if_stable(int(order))
             if fit is None:
                 continue
-            modal = lti.modal_form(fit.A, fit.B, fit.C, fit.D)
-            if not modal.reliable:
+            if fit.residues is None:
                 g = lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z_coarse)
             else:
-                g = modal.d + (modal.residues[None, :] / (z_coarse[:, None] - modal.poles[None, :])).sum(axis=1)
+                g = fit.D[0, 0] + (fit.residues[None, :] / (z_coarse[:, None] - fit.poles[None, :])).sum(axis=1)
             fits[(int(gamma), int(order))] = fit
             responses.append(g)
             stable_orders.append(j)

@@ -78,6 +78,23 @@ def _check_samples(name: str, u: np.ndarray, y: np.ndarray) -> None:
         raise RecordingError(f"{name}: input channel is silent (all samples zero)")
 
 
+def _dc_offset(x: np.ndarray, segments: int = 16) -> tuple[float, bool]:
+    """A constant offset and whether it is significant.
+
+    The offset is the median of the means of ``segments`` equal parts: a real DC offset
+    shifts every part alike, while the slow response of a plant with a pole near z = 1
+    (the FB path's) moves the mean of a few parts only and is not an offset.
+    Significant when it exceeds twice the robust spread of the part means, a fraction
+    ``_DC_RELATIVE`` of the channel RMS and ``_DC_ABSOLUTE``.
+    """
+    parts = np.array([part.mean() for part in np.array_split(x, min(segments, x.size))])
+    offset = float(np.median(parts))
+    spread = 1.4826 * float(np.median(np.abs(parts - offset)))
+    rms = float(np.sqrt(np.mean((x - offset) ** 2)))
+    significant = abs(offset) > _DC_ABSOLUTE and abs(offset) > _DC_RELATIVE * rms and abs(offset) > 2 * spread
+    return offset, significant
+
+
 def _quality(name: str, u: np.ndarray, y: np.ndarray, rails: tuple[float, float]) -> tuple[tuple, tuple]:
     low, high = rails
     clipped = []
@@ -88,12 +105,10 @@ def _quality(name: str, u: np.ndarray, y: np.ndarray, rails: tuple[float, float]
         clipped.append(fraction)
         if fraction:
             warnings.warn(f"{name}: {label} channel clipped on {100 * fraction:.3g} % of samples", RecordingWarning, stacklevel=3)
-        mean = float(np.mean(x))
-        rms = float(np.sqrt(np.mean((x - mean) ** 2)))
-        significant = abs(mean) > _DC_ABSOLUTE and abs(mean) > _DC_RELATIVE * rms
-        offsets.append(mean if significant else 0.0)
+        offset, significant = _dc_offset(x)
+        offsets.append(offset if significant else 0.0)
         if significant:
-            warnings.warn(f"{name}: {label} channel has a DC offset of {mean:.3g} FS", RecordingWarning, stacklevel=3)
+            warnings.warn(f"{name}: {label} channel has a DC offset of {offset:.3g} FS", RecordingWarning, stacklevel=3)
     return tuple(clipped), tuple(offsets)
 
 

@@ -43,6 +43,9 @@ class SubspaceFit:
     D: np.ndarray
     stable: bool
     stabilisation: str  # "none", "reflected k pole(s)", or "unstable (left as is)"
+    # G(z) = D + sum residues / (z - poles), when the eigenvectors of A are well conditioned.
+    poles: np.ndarray | None = None
+    residues: np.ndarray | None = None
 
 
 def fit_b_d(A: np.ndarray, C: np.ndarray, omega: np.ndarray, g: np.ndarray, feedthrough: bool,
@@ -72,11 +75,21 @@ def _observation_rows(A: np.ndarray, C: np.ndarray, z: np.ndarray, eig=None) -> 
     """Rows C (z_k I - A)^-1 (M x n): by the eigenvectors of A, by solves if A is near-defective."""
     n = A.shape[0]
     poles, V = eig if eig is not None else np.linalg.eig(A)
-    condition = np.linalg.cond(V)
-    if np.isfinite(condition) and condition < 1e8:
-        return ((C[0] @ V)[None, :] / (z[:, None] - poles[None, :])) @ np.linalg.inv(V)
+    V_inv = _safe_inverse(V)
+    if V_inv is not None:
+        return ((C[0] @ V)[None, :] / (z[:, None] - poles[None, :])) @ V_inv
     eye = np.eye(n)
     return np.linalg.solve((z[:, None, None] * eye - A).transpose(0, 2, 1), np.broadcast_to(C[0], (z.size, n))[..., None])[..., 0]
+
+
+def _safe_inverse(V: np.ndarray, max_condition: float = 1e8) -> np.ndarray | None:
+    """V^-1, or None when V is too ill-conditioned (1-norm condition number) to trust the modal form."""
+    try:
+        V_inv = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None
+    condition = np.linalg.norm(V, 1) * np.linalg.norm(V_inv, 1)
+    return V_inv if np.isfinite(condition) and condition < max_condition else None
 
 
 def stabilise(A, C, omega, g, feedthrough, method: str = "reflect", weights=None) -> SubspaceFit:
@@ -169,7 +182,9 @@ class SubspaceDecomposition:
         if np.max(np.abs(poles)) >= 1.0:
             return None
         B, D = fit_b_d(A, C, self.omega, self.g, self.feedthrough, self.weights, eig=(poles, V))
-        return SubspaceFit(A, B, C, D, True, "none")
+        V_inv = _safe_inverse(V)
+        residues = None if V_inv is None else (C[0] @ V) * (V_inv @ B[:, 0])
+        return SubspaceFit(A, B, C, D, True, "none", poles, residues)
 
     def fit(self, n: int, stability: str = "reflect") -> SubspaceFit:
         """The order-n model (steps 4-5) with stability handled by ``stability``."""
