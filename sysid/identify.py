@@ -118,10 +118,14 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
         result_model, refined_rms, scan = _refine(body, sweeps, spectra, grid, path, options, provenance, progress)
         seconds["refinement"] = time.perf_counter() - t0
         if refined_rms >= seed_rms:
+            # Keep the seed's choice, but say what the refinement tried and why it was dropped.
+            seed_model.identification["refinement"] = dict(result_model.identification["refinement"], rms=refined_rms,
+                                                           rejected="validated worse than the seed grid's choice")
             result_model = seed_model
     final_rms = seed_rms if result_model is seed_model else refined_rms
+    start_gamma = result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma)
     result_model.identification.update({
-        "gamma": chosen.gamma,
+        "gamma": start_gamma,
         "order": result_model.order,
         "rms": final_rms,
         "noise_floor": floor,

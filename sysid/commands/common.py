@@ -46,9 +46,11 @@ def identification_summary(result: Identification) -> str:
         f"rms {result.seed_rms:.3e} FS ({result.seed_rms / result.noise_floor:.2f}x noise floor)",
     ]
     if result.refined_rms is not None:
-        lines.append(f"  refined (output error): order {info['refinement']['order'] if 'refinement' in info else model.order}, "
-                     f"rms {result.refined_rms:.3e} FS ({result.refined_rms / result.noise_floor:.2f}x noise floor)")
-    lines.append(f"  chosen model     : gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
+        lines.append(f"  refined (output error on raw data): order {info['refinement']['order']} from gamma "
+                     f"{info['refinement']['start_gamma']}, rms {result.refined_rms:.3e} FS "
+                     f"({result.refined_rms / result.noise_floor:.2f}x noise floor)")
+    kind = "refined" if info["refined"] else "seed grid"
+    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
                  f"noise floor {result.noise_floor:.3e} FS, {'stable' if model.stable else 'UNSTABLE'} "
                  f"(largest pole radius {model.spectral_radius:.6f})")
     return "\n".join(lines)

@@ -1,0 +1,19 @@
+"""Firmware generation: identified helmet-anc models -> verified C filter code.
+
+The pipeline (design reference, "Firmware generation"):
+
+``realise``     balanced realisation, truncation, re-discretisation to the board rate;
+``sections``    second-order sections: pairing, ordering, relative degree, scaling;
+``fixedpoint``  Q15/Q31 design with per-section exponents; ``float32`` its float twin;
+``cmsis``       tables and Python models of CMSIS-DSP's biquad kernels;
+``noise``       predicted round-off noise, coefficient error and overflow margins;
+``plan``        all of the above for one model, with the refusals;
+``reference``   bit-exact fixed-point, float32 and float64 Python references;
+``render``      jinja2 templates (``codegen.templates``) and atomic output directories;
+``build``       cffi host builds cached by source hash; ``verify`` the C against the references;
+``api``/``cli`` the front ends (``generate_firmware``, ``generate-firmware``).
+"""
+
+__all__ = ["__version__"]
+
+__version__ = "0.1.0"

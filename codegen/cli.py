@@ -1,0 +1,77 @@
+"""Command line ``generate-firmware MODEL -o DIR``: model JSON -> verified C filter code.
+
+Exit status 0 on success, 2 on bad input or a refusal (one-line message on
+stderr, no traceback). ``build_parser``/``main`` are also what ``helmet-anc
+generate-firmware`` runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from . import __version__
+from .api import format_verification_table, generate_firmware
+from .errors import CodegenError
+from .plan import TARGETS, VARIANTS
+
+__all__ = ["build_parser", "main"]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors are one line and exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
+    parser = _Parser(prog=prog, description="Generate C filter code (float32 and Q15) for the ANC board from a "
+                                            "helmet-anc model, and verify it against the Python references.")
+    parser.add_argument("model", help="model JSON file (format helmet-anc/model@1)")
+    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory (written atomically)")
+    parser.add_argument("--name", help="C prefix of the generated symbols (default: the model's path, fb or ff)")
+    parser.add_argument("--variant", choices=VARIANTS, default="both", help="float32, Q15 or both (default both)")
+    parser.add_argument("--fs", type=float, help="board sample rate in Hz (default: the model's, 44.1 kHz)")
+    parser.add_argument("--target", choices=TARGETS, default="generic",
+                        help="generic C, or coefficient tables for CMSIS-DSP's biquad functions")
+    parser.add_argument("--min-snr", type=float, default=80.0, metavar="DB",
+                        help="refuse a variant whose predicted SNR (full-scale output sine) is below this (default 80)")
+    parser.add_argument("--allow-unstable", action="store_true", help="generate code even for an unstable model")
+    parser.add_argument("--order", type=int, help="balanced truncation to this many states")
+    parser.add_argument("--scaling", choices=("linf", "l1"), default="linf", help="section scaling norm (default linf)")
+    parser.add_argument("--headroom", type=float, default=6.0, metavar="DB", help="scaling headroom in dB (default 6)")
+    parser.add_argument("--quantiser", choices=("efb", "round"), default="efb",
+                        help="Q31 quantiser: first-order error feedback (default) or rounding")
+    parser.add_argument("--verify", action="store_true", help="build on the host and run the sweeps through the C code")
+    parser.add_argument("--sweep", action="append", default=[], metavar="WAV",
+                        help="sweep recording for --verify (give it twice for the two sweeps)")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.verify and not args.sweep:
+        print(f"{parser.prog}: error: --verify needs at least one --sweep WAV", file=sys.stderr)
+        return 2
+    if args.sweep and not args.verify:
+        print(f"{parser.prog}: error: --sweep is only used with --verify", file=sys.stderr)
+        return 2
+    try:
+        manifest = generate_firmware(args.model, args.output, name=args.name, variant=args.variant, fs=args.fs,
+                                     target=args.target, min_snr=args.min_snr, allow_unstable=args.allow_unstable,
+                                     sweeps=args.sweep if args.verify else None, order=args.order,
+                                     scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser)
+    except (CodegenError, ValueError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"{parser.prog}: error: {message}", file=sys.stderr)
+        return 2
+    print(f"wrote {', '.join(str(p) for p in manifest.files)} and {manifest.outdir / 'manifest.json'}")
+    print(format_verification_table(manifest))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

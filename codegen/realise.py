@@ -1,0 +1,157 @@
+"""State-space realisations for code generation: balancing, truncation, re-discretisation.
+
+The balanced realisation (Moore 1981; Laub et al. 1987, "square-root" algorithm)
+has equal, diagonal controllability and observability Gramians whose diagonal are
+the Hankel singular values sigma_1 >= ... >= sigma_n. Truncating to the first r
+states bounds the error by ||G - G_r||_inf <= 2 sum_{i>r} sigma_i (Enns' bound).
+
+Re-discretisation goes through continuous time assuming a zero-order hold:
+[[A, B], [0, 1]] = expm([[Ac, Bc], [0, 0]] T), so (Ac, Bc) come from the matrix
+logarithm and the board-rate model from the matrix exponential at the new period.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from sysid.model import Model
+
+from .errors import CodegenError, UnstableModelError
+
+__all__ = ["Realisation", "balanced_realisation", "hankel_singular_values", "realise", "rediscretise"]
+
+
+@dataclass(frozen=True)
+class Realisation:
+    """A realised LTI core at the board rate plus what was done to obtain it.
+
+    ``delay`` is in board samples; ``delay_error_s`` is the rounding error of the
+    pure delay (board delay minus model delay, seconds) when the rates differ.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: float
+    fs: float
+    delay: int
+    hankel_singular_values: np.ndarray
+    truncated_from: int | None
+    truncation_bound: float
+    delay_error_s: float
+    resampled_from: float | None
+
+
+def _gramians(A, B, C):
+    # Discrete Lyapunov equations: Wc = A Wc A' + B B', Wo = A' Wo A + C' C.
+    wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+    wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
+    return (wc + wc.T) / 2, (wo + wo.T) / 2
+
+
+def hankel_singular_values(A, B, C) -> np.ndarray:
+    """sigma_i = sqrt(eig(Wc Wo)), sorted descending, of a stable discrete system."""
+    wc, wo = _gramians(A, B, C)
+    values = np.sqrt(np.abs(np.linalg.eigvals(wc @ wo)))
+    return np.sort(values.real)[::-1]
+
+
+def _psd_factor(W: np.ndarray) -> np.ndarray:
+    """Upper factor R with W = R' R, robust to a Gramian that is only semi-definite."""
+    try:
+        return scipy.linalg.cholesky(W, lower=False)
+    except np.linalg.LinAlgError:
+        values, vectors = np.linalg.eigh(W)
+        values = np.clip(values, 0.0, None)
+        return (vectors * np.sqrt(values)).T
+
+
+def balanced_realisation(A, B, C, D, order: int | None = None):
+    """Square-root balanced realisation, optionally truncated to ``order`` states.
+
+    Returns (Ab, Bb, Cb, D, hsv). With Wc = Lc Lc', Wo = Lo Lo' and the SVD
+    Lo' Lc = U S V', the balancing transformation is T = Lc V S^-1/2 with inverse
+    S^-1/2 U' Lo' (Laub, Heath, Paige & Ward 1987). States with a Hankel singular
+    value below 1e-14 sigma_1 are uncontrollable or unobservable and always dropped.
+    """
+    A = np.asarray(A, float)
+    B = np.asarray(B, float).reshape(-1, 1)
+    C = np.asarray(C, float).reshape(1, -1)
+    wc, wo = _gramians(A, B, C)
+    lc = _psd_factor(wc).T
+    lo = _psd_factor(wo).T
+    U, s, Vt = np.linalg.svd(lo.T @ lc)
+    keep = int(np.sum(s > 1e-14 * s[0])) if s.size and s[0] > 0 else 0
+    if order is not None:
+        keep = min(keep, int(order))
+    s_half = np.sqrt(s[:keep])
+    T = lc @ Vt[:keep].T / s_half
+    T_inv = (U[:, :keep] / s_half).T @ lo.T
+    return T_inv @ A @ T, T_inv @ B, C @ T, float(np.asarray(D).reshape(-1)[0]), s
+
+
+def rediscretise(A, B, fs_from: float, fs_to: float):
+    """Zero-order-hold re-discretisation of (A, B) from rate fs_from to fs_to (Hz).
+
+    Fails for a pole on the negative real axis, which has no real continuous-time
+    counterpart under a zero-order hold.
+    """
+    n = A.shape[0]
+    poles = np.linalg.eigvals(A)
+    if np.any((np.abs(poles.imag) < 1e-12) & (poles.real <= 0)):
+        raise CodegenError("model has a pole on the negative real axis; it cannot be re-discretised with a zero-order hold")
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n] = A
+    M[:n, n:] = B
+    M[n, n] = 1.0
+    L = scipy.linalg.logm(M)
+    if np.max(np.abs(np.imag(L))) > 1e-9 * max(1.0, np.max(np.abs(L))):
+        raise CodegenError("matrix logarithm of the model is not real; cannot re-discretise")
+    # L = [[Ac, Bc], [0, 0]] T_from; the board needs the same generator times T_to.
+    L = np.real(L) * (fs_from / fs_to)
+    E = scipy.linalg.expm(L)
+    return E[:n, :n], E[:n, n:]
+
+
+def realise(model: Model, fs: float | None = None, order: int | None = None, allow_unstable: bool = False) -> Realisation:
+    """Balanced (optionally truncated) realisation of the model's LTI core at rate fs.
+
+    ``fs=None`` (or the model's own rate) keeps the model's rate. The pure delay of
+    d model samples becomes round(d fs / fs_model) board samples; the rounding
+    error is returned as ``delay_error_s`` (stated in the manifest).
+    Unstable models are refused unless ``allow_unstable``; they are then realised
+    as given (no balancing, which needs the Gramians of a stable system).
+    """
+    if not model.stable and not allow_unstable:
+        raise UnstableModelError(
+            f"model is unstable (spectral radius {model.spectral_radius:.6f} >= 1); use --allow-unstable to generate anyway"
+        )
+    if order is not None and order < 1:
+        raise CodegenError(f"order must be at least 1; found {order}")
+    A, B, C, D = model.A, model.B, model.C, float(model.D[0, 0])
+    if model.stable and model.order:
+        A, B, C, D, hsv = balanced_realisation(A, B, C, D, order)
+        truncated = model.order if A.shape[0] < model.order else None
+        bound = float(2 * np.sum(hsv[A.shape[0]:]))
+    else:
+        if order is not None and order < model.order:
+            raise CodegenError("balanced truncation needs a stable model")
+        hsv, truncated, bound = np.zeros(0), None, 0.0
+    board_fs = model.fs if fs is None else float(fs)
+    if not (np.isfinite(board_fs) and board_fs > 0):
+        raise CodegenError(f"--fs must be a positive sample rate in Hz; found {fs}")
+    delay, delay_error, resampled = model.delay, 0.0, None
+    if abs(board_fs - model.fs) > 1e-9 * model.fs:
+        if A.shape[0]:
+            A, B = rediscretise(A, B, model.fs, board_fs)
+        delay = round(model.delay * board_fs / model.fs)
+        delay_error = delay / board_fs - model.delay / model.fs
+        resampled = model.fs
+        if A.shape[0] and np.max(np.abs(np.linalg.eigvals(A))) >= 1 and not allow_unstable:
+            raise UnstableModelError("re-discretised model is unstable")
+    return Realisation(A=A, B=B, C=C, D=D, fs=board_fs, delay=delay, hankel_singular_values=np.asarray(hsv),
+                       truncated_from=truncated, truncation_bound=bound, delay_error_s=float(delay_error),
+                       resampled_from=resampled)

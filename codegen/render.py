@@ -1,0 +1,224 @@
+"""Render the generated C from prepared data, and write output directories atomically.
+
+Python prepares every number and every C expression fragment (:func:`build_context`);
+the jinja2 templates in ``codegen.templates`` only lay them out. Rendering runs
+in-process with ``StrictUndefined`` so a missing value fails instead of printing
+nothing. Identifiers are validated before they reach a template.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import tempfile
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+
+from . import __version__
+from .cmsis import KERNEL_FUNCTIONS
+from .errors import InvalidNameError, OutputError
+from .fixedpoint import FixedDesign
+from .float32 import FloatDesign
+
+__all__ = [
+    "C_KEYWORDS",
+    "build_context",
+    "float_literal",
+    "int_literal",
+    "render_files",
+    "validate_name",
+    "write_directory",
+]
+
+# C99 and C11 keywords plus names the generated code or its headers already use.
+C_KEYWORDS = frozenset(
+    ["auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else", "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register", "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef", "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary", "_Alignas", "_Alignof", "_Atomic", "_Generic", "_Noreturn", "_Static_assert", "_Thread_local", "asm", "typeof", "main", "NULL", "errno", "assert", "bool", "true", "false"]
+)
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}\Z")
+
+
+def validate_name(name: str) -> str:
+    """Return ``name`` if it is a safe prefix for C identifiers, else raise InvalidNameError.
+
+    Accepted: a letter then up to 31 letters, digits or underscores (C99 keeps 31
+    significant characters of external names), not a C keyword. A leading
+    underscore is refused because such names are reserved to the implementation.
+    """
+    if not isinstance(name, str) or not _NAME.match(name):
+        shown = repr(name) if isinstance(name, str) and len(name) < 60 else "given name"
+        raise InvalidNameError(
+            f"--name must be a C identifier (a letter, then up to 31 letters, digits or underscores); found {shown}"
+        )
+    if name in C_KEYWORDS:
+        raise InvalidNameError(f"--name must not be a C keyword or reserved name; found {name!r}")
+    return name
+
+
+def float_literal(value: float) -> str:
+    """float32 literal that reads back to the same float32 ('%.9g' round-trips single precision)."""
+    text = format(float(value), ".9g")
+    if not any(ch in text for ch in ".en"):
+        text += ".0"
+    return text + "f"
+
+
+def int_literal(value: int, ctype: str = "INT64_C") -> str:
+    """Exact integer literal; the int64 macro keeps the constant's type explicit under -Wconversion."""
+    return f"{ctype}({int(value)})"
+
+
+def _fixed_sections(design: FixedDesign) -> list[dict]:
+    rows = []
+    for k, section in enumerate(design.sections):
+        terms = [f"{int_literal(b)} * h{k}_{lag}" if lag else f"{int_literal(b)} * v{k}"
+                 for lag, b in enumerate(section.b) if b]
+        feedback_terms = [f"{int_literal(c)} * h{k + 1}_{lag + 1}" for lag, c in enumerate(section.c) if c]
+        feedback = ""
+        if feedback_terms:
+            feedback = " + ".join(feedback_terms)
+            feedback = f"({feedback}) >> {section.c_align}" if section.c_align else f"({feedback})"
+        rows.append({
+            "index": k,
+            "order": section.order,
+            "forward": " + ".join(terms) if terms else "0",
+            "b_align": section.b_align,
+            "feedback": feedback,
+            "shift": section.shift,
+            "mask": f"UINT64_C({(1 << section.shift) - 1})",
+            "half": int_literal(1 << (section.shift - 1)),
+        })
+    return rows
+
+
+def _float_sections(design: FloatDesign) -> list[dict]:
+    rows = []
+    for k, section in enumerate(design.sections):
+        terms = [f"{float_literal(b)} * " + (f"h{k}_{lag}" if lag else f"v{k}") for lag, b in enumerate(section.b) if b]
+        feedback = [f"{float_literal(c)} * h{k + 1}_{lag + 1}" for lag, c in enumerate(section.c) if c]
+        rows.append({"index": k, "order": section.order, "forward": " + ".join(terms) if terms else "0.0f",
+                     "feedback": feedback})
+    return rows
+
+
+def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, fixed: FixedDesign | None,
+                  floating: FloatDesign | None, cmsis=None) -> dict:
+    """The plain dictionary the templates render: names, literals, sizes, flags.
+
+    ``variants`` lists the variants to emit ('q15', 'float'); ``fixed``/``floating``
+    carry the generic target's designs, ``cmsis`` the cmsis target's tables.
+    """
+    validate_name(name)
+    hash_text = provenance.get("hash", "unknown")
+    banner = (f"Generated by helmet-anc codegen {__version__} from model {hash_text}; do not edit.")
+    gamma = provenance.get("gamma")
+    described = (f"path {provenance.get('path')}, file {provenance.get('file') or '(in memory)'}, "
+                 f"sha256 {hash_text}, gamma {gamma if gamma is not None else 'n/a'}, "
+                 f"order {provenance.get('order')}")
+    poly_fixed = list(fixed.polynomial) if fixed is not None and fixed.polynomial else []
+    poly_float = list(floating.polynomial) if floating is not None and floating.polynomial else []
+    delay = (fixed or floating or cmsis).delay
+    context = {
+        "banner": banner,
+        "provenance": described.replace("*/", "* /"),
+        "name": name,
+        "NAME": name.upper(),
+        "guard": f"{name.upper()}_FILTER_H",
+        "path_label": provenance.get("path", "?").upper(),
+        "fs_text": format(fs, ".6g"),
+        "fs_int": round(fs),
+        "sections": [{"order": s.order} for s in cascade.sections],
+        "nodes": list(range(len(cascade.sections) + 1)),
+        "delay": delay,
+        "scaling": cascade.scaling,
+        "output_peak_gain": format(cascade.node_gains[-1], ".4g"),
+        "output_margin_db": format(-20 * math.log10(cascade.node_gains[-1]), ".1f"),
+        "headroom_db": format(cascade.headroom_db, "g"),
+        "has_float": "float" in variants,
+        "has_fixed": "q15" in variants,
+        "efb": fixed is not None and fixed.quantiser == "efb",
+        "quantiser_text": ("first-order error feedback of the truncation residue"
+                           if fixed is not None and fixed.quantiser == "efb" else "rounding to nearest"),
+        "polynomial": bool(poly_fixed or poly_float),
+        "fixed_poly": [int_literal(p) for p in poly_fixed],
+        "fixed_poly_rest": [int_literal(p) for p in poly_fixed[-2::-1]],
+        "poly_exponent": fixed.polynomial_exponent if fixed is not None else 0,
+        "float_poly": [float_literal(a) for a in poly_float],
+        "float_poly_rest": [float_literal(a) for a in poly_float[-2::-1]],
+        "fixed_sections": _fixed_sections(fixed) if fixed is not None else [],
+        "float_sections": _float_sections(floating) if floating is not None else [],
+    }
+    if cmsis is not None:
+        context["kernel"] = cmsis.kernel
+        context["kernel_function"] = KERNEL_FUNCTIONS[cmsis.kernel]
+        context["q15_post_shift"] = cmsis.q15_post_shift
+        # The Q15 kernel's rows carry a zero after b0 (CMSIS-DSP's layout for its dual 16-bit MACs).
+        context["cmsis_q15"] = [[f"(q15_t){v}" for v in (row[0], 0, *row[1:])] for row in cmsis.q15_coefficients]
+        context["post_shift"] = cmsis.post_shift
+        context["cmsis_q31"] = [[f"(q31_t){v}" if v != -(2**31) else "(q31_t)(-2147483647 - 1)" for v in row]
+                                for row in cmsis.q31_coefficients]
+        context["cmsis_f32"] = [[float_literal(v) for v in row] for row in cmsis.f32_coefficients]
+    return context
+
+
+def _environment() -> jinja2.Environment:
+    loader = jinja2.FunctionLoader(
+        lambda template: resources.files("codegen.templates").joinpath(template).read_text(encoding="utf-8")
+    )
+    return jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
+                              autoescape=False)
+
+
+def render_files(context: dict, target: str = "generic") -> dict[str, str]:
+    """{file name: text} of NAME_filter.h and NAME_filter.c for the target."""
+    prefix = "cmsis_" if target == "cmsis" else ""
+    env = _environment()
+    name = context["name"]
+    return {
+        f"{name}_filter.h": env.get_template(f"{prefix}filter.h.j2").render(context),
+        f"{name}_filter.c": env.get_template(f"{prefix}filter.c.j2").render(context),
+    }
+
+
+def write_directory(outdir: str | os.PathLike, files: dict[str, str | bytes]) -> Path:
+    """Write ``files`` as the directory ``outdir``, all or nothing.
+
+    The files go to a temporary directory beside ``outdir`` that is renamed into
+    place; an existing ``outdir`` is replaced only after the new one is complete.
+    """
+    outdir = Path(outdir)
+    parent = outdir.parent if str(outdir.parent) else Path(".")
+    if outdir.exists() and not outdir.is_dir():
+        raise OutputError(f"{outdir}: exists and is not a directory")
+    if not parent.is_dir():
+        raise OutputError(f"{outdir}: parent directory {parent} does not exist")
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.", dir=parent))
+    except OSError as exc:
+        raise OutputError(f"{outdir}: cannot write to {parent} ({exc.strerror})") from None
+    old = None
+    try:
+        for filename, content in files.items():
+            mode = "wb" if isinstance(content, bytes) else "w"
+            with open(staging / filename, mode, **({} if mode == "wb" else {"encoding": "utf-8"})) as handle:
+                handle.write(content)
+        os.chmod(staging, 0o755)
+        if outdir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.old.", dir=parent))
+            os.rmdir(old)
+            os.replace(outdir, old)
+        os.replace(staging, outdir)
+    except OSError as exc:
+        shutil.rmtree(staging, ignore_errors=True)
+        if old is not None and old.exists() and not outdir.exists():
+            os.replace(old, outdir)
+        raise OutputError(f"{outdir}: cannot write ({exc.strerror})") from None
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return outdir

@@ -1,0 +1,156 @@
+"""Verification of a host build against the Python references, sample by sample.
+
+For every sweep: the Q15 C output must equal :func:`codegen.reference.fixed_reference`
+to 0 LSB; the float C output must equal :func:`codegen.reference.float32_reference`
+within ``FLOAT_TOLERANCE`` (it is bit-exact when the compiler keeps the operation
+order, which the build flags ask for); both are compared with the float64 model
+as an SNR. Each sweep is fed in two blocks of unequal length, so the state is
+carried over between calls as on the board.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .build import HostFilter
+from .cmsis import cmsis_q15_reference, df2t_f32_reference
+from .errors import VerificationError
+from .plan import Plan
+from .reference import (
+    fixed_reference,
+    float32_reference,
+    float64_reference,
+    from_q15,
+    to_q15,
+)
+
+__all__ = ["CMSIS_FLOAT_TOLERANCE", "FLOAT_TOLERANCE", "CmsisPackageFilter", "reference_outputs", "snr_db", "verify_host"]
+
+# Tolerance between the float C code and its float32 reference, relative to max(1, peak output).
+FLOAT_TOLERANCE = 1e-6
+# The cmsisdsp package's DF2T kernel orders its float operations differently (and may fuse them).
+CMSIS_FLOAT_TOLERANCE = 1e-4
+
+
+def snr_db(reference: np.ndarray, test: np.ndarray) -> float:
+    """10 log10(sum reference^2 / sum (test - reference)^2), in dB."""
+    reference = np.asarray(reference, float)
+    error = np.asarray(test, float) - reference
+    noise = float(np.sum(error**2))
+    return float("inf") if noise == 0 else float(10 * np.log10(np.sum(reference**2) / noise))
+
+
+def _blocks(run, x: np.ndarray) -> np.ndarray:
+    cut = max(1, (x.size * 3) // 7)
+    return np.concatenate((run(x[:cut]), run(x[cut:])))
+
+
+def reference_outputs(plan: Plan, u: np.ndarray) -> dict:
+    """Python references of every planned variant for the full-scale input u."""
+    out = {}
+    q15 = to_q15(u)
+    if "q15" in plan.predictions:
+        out["q15_input"] = q15
+        out["q15"] = (cmsis_q15_reference(plan.cmsis, q15) if plan.target == "cmsis"
+                      else fixed_reference(plan.fixed, q15))
+        out["float64_q15"] = float64_reference(plan.realisation, from_q15(q15), plan.model.input_nonlinearity)
+    if "float" in plan.predictions:
+        xf = np.asarray(u, np.float32)
+        out["float_input"] = xf
+        out["float"] = (df2t_f32_reference(plan.cmsis, xf) if plan.target == "cmsis"
+                        else float32_reference(plan.floating, xf))
+        out["float64_float"] = float64_reference(plan.realisation, xf.astype(float), plan.model.input_nonlinearity)
+    return out
+
+
+def verify_host(plan: Plan, host: HostFilter, sweeps: list[np.ndarray], names: list[str] | None = None) -> dict:
+    """Run each sweep through the C code and the references; raise on any mismatch.
+
+    Returns {"sweeps": [...per-sweep figures...], "passed": True}.
+    """
+    names = names or [f"sweep {i + 1}" for i in range(len(sweeps))]
+    rows = []
+    for label, u in zip(names, sweeps):
+        refs = reference_outputs(plan, np.asarray(u, float))
+        row = {"sweep": label, "samples": int(np.size(u))}
+        if "q15" in refs:
+            host.reset("q15")
+            c_out = _blocks(host.process_q15, refs["q15_input"])
+            diff = np.abs(c_out.astype(np.int64) - refs["q15"].astype(np.int64))
+            row["q15"] = {"max_lsb_difference": int(diff.max(initial=0)), "mismatches": int(np.count_nonzero(diff)),
+                          "snr_vs_float64_db": snr_db(refs["float64_q15"], from_q15(c_out))}
+            if diff.any():
+                raise VerificationError(f"{label}: Q15 C output differs from the bit-exact reference in "
+                                        f"{row['q15']['mismatches']} samples (max {row['q15']['max_lsb_difference']} LSB)")
+        if "float" in refs:
+            host.reset("f32")
+            c_out = _blocks(host.process_f32, refs["float_input"])
+            scale = max(1.0, float(np.max(np.abs(refs["float"]), initial=0.0)))
+            diff = float(np.max(np.abs(c_out.astype(float) - refs["float"].astype(float)), initial=0.0)) / scale
+            row["float"] = {"max_relative_difference": diff, "bit_exact": bool(np.array_equal(c_out, refs["float"])),
+                            "snr_vs_float64_db": snr_db(refs["float64_float"], c_out)}
+            tolerance = CMSIS_FLOAT_TOLERANCE if plan.target == "cmsis" else FLOAT_TOLERANCE
+            if not diff <= tolerance:
+                raise VerificationError(f"{label}: float C output differs from the float32 reference by {diff:.3g} "
+                                        f"(tolerance {tolerance:g})")
+        rows.append(row)
+    return {"sweeps": rows, "passed": True}
+
+
+class CmsisPackageFilter:
+    """The ``cmsisdsp`` package's kernels run on the cmsis target's tables, as the C would on the board.
+
+    Used to verify ``--target cmsis``, whose C needs CMSIS-DSP headers that the host
+    build does not have; the delay and Q15 conversions are applied as in the template.
+    """
+
+    def __init__(self, tables):
+        try:
+            import cmsisdsp
+        except ImportError:
+            raise VerificationError("--verify with --target cmsis needs the cmsisdsp package (pip install cmsisdsp)") from None
+        self._dsp, self._tables = cmsisdsp, tables
+        self.reset("q15")
+        self.reset("f32")
+
+    def reset(self, kind: str) -> None:
+        dsp, tables, stages = self._dsp, self._tables, len(self._tables.q31_coefficients)
+        if kind == "q15":
+            q31_rows = np.array(tables.q31_coefficients, np.int32).ravel()
+            if tables.kernel == "q15":
+                self._fixed = dsp.arm_biquad_casd_df1_inst_q15()
+                rows = np.array([(r[0], 0, *r[1:]) for r in tables.q15_coefficients], np.int16).ravel()
+                dsp.arm_biquad_cascade_df1_init_q15(self._fixed, stages, rows, np.zeros(4 * stages, np.int16),
+                                                    tables.q15_post_shift)
+            elif tables.kernel == "q31":
+                self._fixed = dsp.arm_biquad_casd_df1_inst_q31()
+                dsp.arm_biquad_cascade_df1_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int32),
+                                                    tables.post_shift)
+            else:
+                self._fixed = dsp.arm_biquad_cas_df1_32x64_ins_q31()
+                dsp.arm_biquad_cas_df1_32x64_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int64),
+                                                      tables.post_shift)
+            self._line_q15 = np.zeros(tables.delay, np.int16)
+        else:
+            self._f32 = dsp.arm_biquad_cascade_df2T_instance_f32()
+            dsp.arm_biquad_cascade_df2T_init_f32(self._f32, stages, np.array(tables.f32_coefficients, np.float32).ravel(),
+                                                 np.zeros(2 * stages, np.float32))
+            self._line_f32 = np.zeros(tables.delay, np.float32)
+
+    @staticmethod
+    def _delay(line: np.ndarray, x: np.ndarray):
+        joined = np.concatenate((line, x))
+        return joined[: x.size], joined[x.size:]
+
+    def process_q15(self, x: np.ndarray) -> np.ndarray:
+        u, self._line_q15 = self._delay(self._line_q15, np.asarray(x, np.int16))
+        if self._tables.kernel == "q15":
+            return np.asarray(self._dsp.arm_biquad_cascade_df1_q15(self._fixed, u), np.int16)
+        run = (self._dsp.arm_biquad_cascade_df1_q31 if self._tables.kernel == "q31"
+               else self._dsp.arm_biquad_cas_df1_32x64_q31)
+        y = run(self._fixed, u.astype(np.int32) * 65536).astype(np.int64)
+        return np.clip((y + 32768) >> 16, -32768, 32767).astype(np.int16)
+
+    def process_f32(self, x: np.ndarray) -> np.ndarray:
+        u, self._line_f32 = self._delay(self._line_f32, np.asarray(x, np.float32))
+        return np.asarray(self._dsp.arm_biquad_cascade_df2T_f32(self._f32, u), np.float32)

@@ -1,0 +1,59 @@
+/*
+ * Board runtime of the helmet ANC: wires the generated FB and FF filters (names
+ * "fb" and "ff", Q15 variant) into a double-buffered block audio callback.
+ *
+ * Timing: the codec DMA runs over two halves of each buffer. While half h is
+ * being captured (chin and ear microphones) and played (speaker), the CPU works
+ * on the other half. anc_dma_block_done() (from the DMA interrupt) marks a captured
+ * half ready; anc_service() (main loop) processes it with anc_process_block(),
+ * which must finish within one block period.
+ *
+ * Per block of ANC_BLOCK samples:
+ *   ear_model[n] = G_fb * played[n]   the FB model driven by what the speaker played
+ *                                     while this block was captured (the block the
+ *                                     runtime computed one period earlier);
+ *   d_hat[n]     = ear[n] - ear_model[n]   internal-model disturbance observer:
+ *                                     the ear signal not caused by the speaker;
+ *   ff_pred[n]   = G_ff * chin[n]     the ear noise predicted from the chin microphone;
+ *   speaker      = controller(d_hat, ff_pred)   the application's control law.
+ * All signals are Q15; differences saturate.
+ */
+#ifndef ANC_RUNTIME_H
+#define ANC_RUNTIME_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "fb_filter.h"
+#include "ff_filter.h"
+
+#ifndef ANC_BLOCK
+#define ANC_BLOCK 32u
+#endif
+
+/* Control law: from the disturbance estimate and the FF prediction (n samples
+ * each) compute the next n speaker samples. */
+typedef void (*anc_controller_fn)(void *context, const int16_t *d_hat, const int16_t *ff_pred,
+                                  int16_t *speaker, size_t n);
+
+typedef struct {
+    fb_q15_state fb;
+    ff_q15_state ff;
+    int16_t chin[2][ANC_BLOCK];     /* DMA capture, chin microphone */
+    int16_t ear[2][ANC_BLOCK];      /* DMA capture, ear-canal microphone */
+    int16_t speaker[2][ANC_BLOCK];  /* DMA playback, headphone drive */
+    int16_t played[ANC_BLOCK];      /* speaker samples played during the block being processed */
+    int16_t ear_model[ANC_BLOCK];
+    int16_t d_hat[ANC_BLOCK];
+    int16_t ff_pred[ANC_BLOCK];
+    volatile uint32_t ready;        /* bit h: half h captured and not yet processed */
+    uint32_t overruns;              /* halves captured again before they were processed */
+    anc_controller_fn controller;   /* NULL: the speaker stays silent (observer only) */
+    void *controller_context;
+} anc_runtime;
+
+void anc_init(anc_runtime *rt, anc_controller_fn controller, void *controller_context);
+void anc_dma_block_done(anc_runtime *rt, unsigned half);
+int anc_service(anc_runtime *rt);
+void anc_process_block(anc_runtime *rt, const int16_t *chin, const int16_t *ear, int16_t *speaker);
+
+#endif /* ANC_RUNTIME_H */

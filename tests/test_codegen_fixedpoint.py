@@ -1,0 +1,92 @@
+"""Tests of codegen.fixedpoint, codegen.float32 and codegen.noise (design and prediction)."""
+
+import numpy as np
+import pytest
+from conftest_codegen import appendix_a_model, model_sweeps
+
+from codegen.errors import PrecisionError
+from codegen.fixedpoint import COEFFICIENT_SUM_LIMIT, design_fixed, polynomial_exponent
+from codegen.float32 import design_float32
+from codegen.noise import predict_fixed, predict_float32
+from codegen.plan import plan_firmware
+from codegen.realise import realise
+from codegen.reference import fixed_reference, float64_reference, from_q15, to_q15
+from codegen.sections import cascade_response, design_cascade, peak_grid
+
+
+@pytest.fixture(scope="module", params=["fb", "ff"])
+def cascade(request):
+    return request.param, design_cascade(realise(appendix_a_model(request.param)))
+
+
+class TestFixedDesign:
+    def test_accumulator_bound(self, cascade):
+        _, c = cascade
+        design = design_fixed(c, 0)
+        for s in design.sections:
+            assert sum(abs(v) for v in s.b) <= COEFFICIENT_SUM_LIMIT
+            assert sum(abs(v) for v in s.c) <= COEFFICIENT_SUM_LIMIT
+            # Both product sums < 2^61 and the residue < 2^r: the int64 accumulator cannot overflow.
+            assert 2 * COEFFICIENT_SUM_LIMIT * 2**31 + 2**s.shift < 2**63
+
+    def test_quantised_response_close(self, cascade):
+        _, c = cascade
+        design = design_fixed(c, 0)
+        w = peak_grid([p for s in c.sections for p in s.poles])
+        exact = cascade_response(c.sections, w)
+        approx = cascade_response([s.realised() for s in design.sections], w)
+        assert np.max(np.abs(approx - exact) / np.abs(exact)) < 1e-5
+
+    def test_polynomial_exponent(self):
+        assert polynomial_exponent([0.5, 0.2]) == 0
+        assert polynomial_exponent([1.0]) == 1
+        assert polynomial_exponent([1.5, -1.0]) == 2
+
+
+class TestPrediction:
+    def test_predicted_q15_floor_and_measured_snr(self, cascade):
+        path, c = cascade
+        model = appendix_a_model(path)
+        design = design_fixed(c, 0)
+        prediction = predict_fixed(c, design, model.fs)
+        # The Q15 output quantiser alone gives 6.02 * 16 + 1.76 = 98.1 dB for a full-scale sine.
+        assert prediction.roundoff_snr_db == pytest.approx(98.1, abs=0.5)
+        for sweep in model_sweeps(model, seconds=0.2, peak=0.9):
+            q = to_q15(sweep)
+            exact = float64_reference(realise(model), from_q15(q))
+            error = from_q15(fixed_reference(design, q)) - exact
+            ideal = from_q15(to_q15(exact)) - exact
+            # Internal round-off is far below the output quantiser: within 0.5 dB of ideal rounding.
+            assert 10 * np.log10(np.sum(error**2) / np.sum(ideal**2)) < 0.5
+
+    def test_error_feedback_beats_rounding_inside(self, cascade):
+        path, c = cascade
+        fs = appendix_a_model(path).fs
+        efb = predict_fixed(c, design_fixed(c, 0, quantiser="efb"), fs).roundoff_power
+        rnd = predict_fixed(c, design_fixed(c, 0, quantiser="round"), fs).roundoff_power
+        q15 = 2.0**-30 / 12
+        assert efb - q15 < rnd - q15
+
+    def test_float32_prediction_meets_target(self, cascade):
+        path, c = cascade
+        assert predict_float32(c, design_float32(c, 0), appendix_a_model(path).fs).snr_db > 90
+
+
+class TestRefusal:
+    def test_min_snr_refusal_names_reason(self):
+        with pytest.raises(PrecisionError, match=r"q15 variant refused: predicted SNR 98\.\d dB is below --min-snr 120 dB; limited by round-off"):
+            plan_firmware(appendix_a_model("ff"), variant="q15", min_snr=120.0)
+
+    @pytest.mark.parametrize("path, min_snr, kernel", [("fb", 80.0, "q31x64"), ("ff", 80.0, "q31"),
+                                                        ("fb", 10.0, "q31"), ("ff", 10.0, "q15")])
+    def test_cheapest_cmsis_kernel_meeting_request(self, path, min_snr, kernel):
+        plan = plan_firmware(appendix_a_model(path), variant="q15", target="cmsis", min_snr=min_snr)
+        assert plan.cmsis.kernel == kernel
+        assert plan.predictions["q15"].snr_db >= min_snr
+        if path == "fb":
+            # Q15 coefficients put the pole at 0.99991 onto the unit circle.
+            assert plan.kernel_predictions["q15"].snr_db == float("-inf")
+
+    def test_cmsis_refusal_names_best_kernel(self):
+        with pytest.raises(PrecisionError, match=r"best CMSIS kernel arm_biquad_cas_df1_32x64_q31\) refused"):
+            plan_firmware(appendix_a_model("fb"), variant="q15", target="cmsis", min_snr=110.0)

@@ -1,0 +1,245 @@
+"""The generated filters on the Cortex-M4 (QEMU mps2-an386) against the host, and the board runtime.
+
+Needs ``arm-none-eabi-gcc`` (with newlib headers) and ``qemu-system-arm``; the
+tests that use them skip with the reason when they are missing.
+"""
+
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest_codegen import appendix_a_model, have, model_sweeps
+
+from codegen.api import generate_firmware
+from codegen.build import HOST_CFLAGS
+from codegen.plan import plan_firmware
+from codegen.reference import fixed_reference, float32_reference, from_q15, to_q15
+
+FIRMWARE = Path(__file__).resolve().parents[1] / "firmware"
+MAKEFILE = FIRMWARE / "Makefile"
+needs_cross = pytest.mark.skipif(not have("arm-none-eabi-gcc"),
+                                 reason="arm-none-eabi-gcc not installed (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)")
+needs_qemu = pytest.mark.skipif(not have("qemu-system-arm"), reason="qemu-system-arm not installed (apt-get install qemu-system-arm)")
+
+
+def _make(target, workdir, **variables):
+    args = ["make", "-s", "-f", str(MAKEFILE), target] + [f"{k}={v}" for k, v in variables.items()]
+    result = subprocess.run(args, cwd=workdir, capture_output=True, text=True, check=False, timeout=180)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result
+
+
+@pytest.fixture(scope="module", params=["fb", "ff"])
+def harness_run(request, tmp_path_factory):
+    """Generated filter, its input files, and the outputs of the host and QEMU runs."""
+    path = request.param
+    model = appendix_a_model(path)
+    root = tmp_path_factory.mktemp(f"fw_{path}")
+    generate_firmware(model, root / "gen")
+    sweep = np.concatenate(model_sweeps(model, seconds=0.1))
+    q = to_q15(sweep)
+    xf = from_q15(q).astype(np.float32)
+    outputs = {}
+    for where in ("host", "m4"):
+        work = root / where
+        work.mkdir()
+        q.tofile(work / "in_q15.raw")
+        xf.tofile(work / "in_f32.raw")
+        outputs[where] = work
+    return model, root, q, xf, outputs
+
+
+def _outputs(work):
+    return np.fromfile(work / "out_q15.raw", np.int16), np.fromfile(work / "out_f32.raw", np.float32)
+
+
+def test_host_harness_matches_reference(harness_run):
+    model, root, q, xf, outputs = harness_run
+    _make("host", outputs["host"], GEN=root / "gen", NAME=model.path)
+    result = subprocess.run([str(outputs["host"] / "build" / "harness_host")], cwd=outputs["host"],
+                            capture_output=True, text=True, check=False, timeout=60)
+    assert result.returncode == 0, result.stdout
+    y_q15, y_f32 = _outputs(outputs["host"])
+    plan = plan_firmware(model)
+    np.testing.assert_array_equal(y_q15, fixed_reference(plan.fixed, q))
+    np.testing.assert_array_equal(y_f32, float32_reference(plan.floating, xf))
+
+
+@needs_cross
+@needs_qemu
+def test_qemu_output_equals_host_output(harness_run):
+    model, root, q, _xf, outputs = harness_run
+    if not (outputs["host"] / "out_q15.raw").exists():
+        _make("host", outputs["host"], GEN=root / "gen", NAME=model.path)
+        subprocess.run([str(outputs["host"] / "build" / "harness_host")], cwd=outputs["host"], check=True, timeout=60)
+    _make("m4", outputs["m4"], GEN=root / "gen", NAME=model.path)
+    result = subprocess.run(["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor", "none", "-serial", "none",
+                             "-semihosting-config", "enable=on,target=native",
+                             "-kernel", str(outputs["m4"] / "build" / "harness_m4.elf")],
+                            cwd=outputs["m4"], capture_output=True, text=True, check=False, timeout=120)
+    assert result.returncode == 0 and "harness done" in result.stdout + result.stderr, result.stdout + result.stderr
+    m4_q15, m4_f32 = _outputs(outputs["m4"])
+    host_q15, host_f32 = _outputs(outputs["host"])
+    assert m4_q15.size == q.size
+    np.testing.assert_array_equal(m4_q15, host_q15)  # 0 LSB
+    np.testing.assert_array_equal(m4_f32.view(np.uint32), host_f32.view(np.uint32))
+
+
+@needs_cross
+def test_cross_compile_clean_and_sized(tmp_path):
+    generate_firmware(appendix_a_model("fb"), tmp_path / "gen")
+    result = _make("size", tmp_path, GEN=tmp_path / "gen", NAME="fb")
+    text = result.stdout.split()
+    sizes = dict(zip(text[:6], text[6:12]))
+    assert 0 < int(sizes["text"]) < 8192 and int(sizes["data"]) == 0 and int(sizes["bss"]) == 0
+    # No undefined symbols: no heap, no libm, no libgcc helpers in the filter.
+    undefined = subprocess.run(["arm-none-eabi-nm", "-u", str(tmp_path / "build" / "filter_m4.o")],
+                               capture_output=True, text=True, check=True, timeout=60).stdout.split()
+    assert undefined == []
+
+
+@needs_cross
+def test_cross_compile_with_delay_and_polynomial(tmp_path):
+    model = appendix_a_model("ff")
+    model.delay, model.input_nonlinearity = 7, [1.0, 0.1, -0.05]
+    generate_firmware(model, tmp_path / "gen", name="ff_nl")
+    _make("size", tmp_path, GEN=tmp_path / "gen", NAME="ff_nl")
+
+
+@pytest.fixture(scope="module")
+def runtime_sources(tmp_path_factory):
+    root = tmp_path_factory.mktemp("runtime")
+    generate_firmware(appendix_a_model("fb"), root / "fb", variant="q15")
+    generate_firmware(appendix_a_model("ff"), root / "ff", variant="q15")
+    return root
+
+
+@needs_cross
+def test_runtime_cross_compiles(runtime_sources):
+    _make("runtime-m4", runtime_sources, FB=runtime_sources / "fb", FF=runtime_sources / "ff")
+    assert (runtime_sources / "build" / "anc_runtime_m4.o").stat().st_size > 0
+
+
+def test_runtime_observer_and_predictor(runtime_sources, tmp_path):
+    """d_hat = ear - G_fb * played and ff_pred = G_ff * chin, block by block, double-buffered."""
+    import cffi
+
+    root = runtime_sources
+    block = 32
+    ffi = cffi.FFI()
+    ffi.cdef("""
+        typedef struct { ...; } anc_runtime;
+        void test_setup(anc_runtime *rt);
+        void anc_dma_block_done(anc_runtime *rt, unsigned half);
+        int anc_service(anc_runtime *rt);
+        int16_t *test_capture(anc_runtime *rt, unsigned half, int which);
+        int16_t *test_signal(anc_runtime *rt, int which);
+        size_t test_size(void);
+    """)
+    ffi.set_source("_anc_runtime_test", """
+        #include "anc_runtime.h"
+        /* Control law of the test: cancel the FF prediction (speaker = -ff_pred). */
+        static void negate(void *context, const int16_t *d_hat, const int16_t *ff_pred, int16_t *speaker, size_t n)
+        {
+            size_t i;
+            (void)context; (void)d_hat;
+            for (i = 0; i < n; ++i) {
+                speaker[i] = (int16_t)((ff_pred[i] == -32768) ? 32767 : -ff_pred[i]);
+            }
+        }
+        void test_setup(anc_runtime *rt) { anc_init(rt, negate, NULL); }
+        int16_t *test_capture(anc_runtime *rt, unsigned half, int which)
+        {
+            return which == 0 ? rt->chin[half] : (which == 1 ? rt->ear[half] : rt->speaker[half]);
+        }
+        int16_t *test_signal(anc_runtime *rt, int which) { return which == 0 ? rt->d_hat : rt->ff_pred; }
+        size_t test_size(void) { return sizeof(anc_runtime); }
+    """, sources=[str(FIRMWARE / "anc_runtime.c"), str(root / "fb" / "fb_filter.c"), str(root / "ff" / "ff_filter.c")],
+        include_dirs=[str(FIRMWARE), str(root / "fb"), str(root / "ff")], extra_compile_args=list(HOST_CFLAGS))
+    library = ffi.compile(tmpdir=str(tmp_path))
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_anc_runtime_test", library)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    lib, cffi_ffi = module.lib, module.ffi
+    rt = cffi_ffi.new("char[]", lib.test_size())
+    rt = cffi_ffi.cast("anc_runtime *", rt)
+    lib.test_setup(rt)
+
+    rng = np.random.default_rng(3)
+    blocks = 20
+    chin = to_q15(rng.uniform(-0.3, 0.3, blocks * block))
+    ear = to_q15(rng.uniform(-0.3, 0.3, blocks * block))
+    d_hat, ff_pred, speaker = [], [], []
+    for k in range(blocks):
+        half = k % 2
+        cffi_ffi.memmove(lib.test_capture(rt, half, 0), chin[k * block:(k + 1) * block].tobytes(), 2 * block)
+        cffi_ffi.memmove(lib.test_capture(rt, half, 1), ear[k * block:(k + 1) * block].tobytes(), 2 * block)
+        lib.anc_dma_block_done(rt, half)
+        assert lib.anc_service(rt) == 1 and lib.anc_service(rt) == 0
+        d_hat.append(np.frombuffer(cffi_ffi.buffer(lib.test_signal(rt, 0), 2 * block), np.int16).copy())
+        ff_pred.append(np.frombuffer(cffi_ffi.buffer(lib.test_signal(rt, 1), 2 * block), np.int16).copy())
+        speaker.append(np.frombuffer(cffi_ffi.buffer(lib.test_capture(rt, half ^ 1, 2), 2 * block), np.int16).copy())
+
+    fb_plan, ff_plan = plan_firmware(appendix_a_model("fb"), variant="q15"), plan_firmware(appendix_a_model("ff"), variant="q15")
+    expected_ff = fixed_reference(ff_plan.fixed, chin)
+    np.testing.assert_array_equal(np.concatenate(ff_pred), expected_ff)
+    expected_speaker = np.where(expected_ff == -32768, 32767, -expected_ff.astype(np.int32)).astype(np.int16)
+    np.testing.assert_array_equal(np.concatenate(speaker), expected_speaker)
+    # The speaker block computed at block k is played while block k + 1 is captured.
+    played = np.concatenate((np.zeros(block, np.int16), expected_speaker[:-block]))
+    ear_model = fixed_reference(fb_plan.fixed, played).astype(np.int32)
+    expected_d = np.clip(ear.astype(np.int32) - ear_model, -32768, 32767).astype(np.int16)
+    np.testing.assert_array_equal(np.concatenate(d_hat), expected_d)
+
+
+# Declarations of the CMSIS-DSP API the cmsis target calls (names, types and
+# signatures as documented for CMSIS-DSP 1.x), enough to compile the target's C.
+_CMSIS_DECLARATIONS = """
+#ifndef ARM_MATH_H
+#define ARM_MATH_H
+#include <stdint.h>
+typedef int16_t q15_t;
+typedef int32_t q31_t;
+typedef int64_t q63_t;
+typedef float float32_t;
+typedef struct { int8_t numStages; q15_t *pState; const q15_t *pCoeffs; int8_t postShift; } arm_biquad_casd_df1_inst_q15;
+typedef struct { uint8_t numStages; q63_t *pState; const q31_t *pCoeffs; uint8_t postShift; } arm_biquad_cas_df1_32x64_ins_q31;
+void arm_biquad_cascade_df1_init_q15(arm_biquad_casd_df1_inst_q15 *S, uint8_t numStages, const q15_t *pCoeffs,
+                                     q15_t *pState, int8_t postShift);
+void arm_biquad_cascade_df1_q15(const arm_biquad_casd_df1_inst_q15 *S, const q15_t *pSrc, q15_t *pDst, uint32_t blockSize);
+void arm_biquad_cas_df1_32x64_init_q31(arm_biquad_cas_df1_32x64_ins_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                       q63_t *pState, uint8_t postShift);
+void arm_biquad_cas_df1_32x64_q31(const arm_biquad_cas_df1_32x64_ins_q31 *S, const q31_t *pSrc, q31_t *pDst,
+                                  uint32_t blockSize);
+typedef struct { uint32_t numStages; q31_t *pState; const q31_t *pCoeffs; uint8_t postShift; } arm_biquad_casd_df1_inst_q31;
+typedef struct { uint8_t numStages; float32_t *pState; const float32_t *pCoeffs; } arm_biquad_cascade_df2T_instance_f32;
+void arm_biquad_cascade_df1_init_q31(arm_biquad_casd_df1_inst_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                     q31_t *pState, int8_t postShift);
+void arm_biquad_cascade_df1_q31(const arm_biquad_casd_df1_inst_q31 *S, const q31_t *pSrc, q31_t *pDst, uint32_t blockSize);
+void arm_biquad_cascade_df2T_init_f32(arm_biquad_cascade_df2T_instance_f32 *S, uint8_t numStages,
+                                      const float32_t *pCoeffs, float32_t *pState);
+void arm_biquad_cascade_df2T_f32(const arm_biquad_cascade_df2T_instance_f32 *S, const float32_t *pSrc,
+                                 float32_t *pDst, uint32_t blockSize);
+#endif
+"""
+
+
+@pytest.mark.parametrize("compiler", ["gcc", "arm-none-eabi-gcc"])
+@pytest.mark.parametrize("path, min_snr, kernel", [("ff", 10.0, "q15"), ("ff", 80.0, "q31"), ("fb", 80.0, "q31x64")])
+def test_cmsis_target_compiles_clean(tmp_path, compiler, path, min_snr, kernel):
+    if not have(compiler):
+        pytest.skip(f"{compiler} not installed")
+    model = appendix_a_model(path)
+    model.delay = 3
+    manifest = generate_firmware(model, tmp_path / "gen", target="cmsis", min_snr=min_snr)
+    assert manifest.data["formats"]["cmsis"]["kernel"] == kernel
+    (tmp_path / "gen" / "arm_math.h").write_text(_CMSIS_DECLARATIONS)
+    flags = list(HOST_CFLAGS)
+    if compiler != "gcc":
+        flags += ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
+    result = subprocess.run([compiler, *flags, "-c", "-o", "filter.o", f"{path}_filter.c"], cwd=tmp_path / "gen",
+                            capture_output=True, text=True, check=False, timeout=120)
+    assert result.returncode == 0, result.stderr
