@@ -81,7 +81,6 @@ def naive_tables(model):
     zpk2sos pads the missing zeros at the origin, which advances the output by
     r = (poles - zeros) samples; the returned r lets the comparison undo that.
     """
-    from codegen.cmsis import CmsisTables
     from sysid import lti
 
     zeros, poles = model.zeros(), model.poles()

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from sysid.lti import gramians, hankel_singular_values
 from sysid.model import Model
 
 from .errors import CodegenError, UnstableModelError
@@ -45,20 +46,6 @@ class Realisation:
     resampled_from: float | None
 
 
-def _gramians(A, B, C):
-    # Discrete Lyapunov equations: Wc = A Wc A' + B B', Wo = A' Wo A + C' C.
-    wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
-    wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
-    return (wc + wc.T) / 2, (wo + wo.T) / 2
-
-
-def hankel_singular_values(A, B, C) -> np.ndarray:
-    """sigma_i = sqrt(eig(Wc Wo)), sorted descending, of a stable discrete system."""
-    wc, wo = _gramians(A, B, C)
-    values = np.sqrt(np.abs(np.linalg.eigvals(wc @ wo)))
-    return np.sort(values.real)[::-1]
-
-
 def _psd_factor(W: np.ndarray) -> np.ndarray:
     """Upper factor R with W = R' R, robust to a Gramian that is only semi-definite."""
     try:
@@ -80,7 +67,7 @@ def balanced_realisation(A, B, C, D, order: int | None = None):
     A = np.asarray(A, float)
     B = np.asarray(B, float).reshape(-1, 1)
     C = np.asarray(C, float).reshape(1, -1)
-    wc, wo = _gramians(A, B, C)
+    wc, wo = gramians(A, B, C)
     lc = _psd_factor(wc).T
     lo = _psd_factor(wo).T
     U, s, Vt = np.linalg.svd(lo.T @ lc)

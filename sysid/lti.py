@@ -25,6 +25,8 @@ __all__ = [
     "invariant_zeros",
     "spectral_radius",
     "real_block_diagonal",
+    "gramians",
+    "hankel_singular_values",
 ]
 
 # Above this eigenvector condition number the modal form loses more than about
@@ -158,3 +160,29 @@ def real_block_diagonal(poles: np.ndarray) -> np.ndarray:
         used[j] = True
         blocks.append(np.array([[p.real, p.imag], [-p.imag, p.real]]))
     return scipy.linalg.block_diag(*blocks) if blocks else np.zeros((0, 0))
+
+
+def gramians(A, B, C) -> tuple[np.ndarray, np.ndarray]:
+    """Controllability and observability Gramians of a stable system.
+
+    W_c = A W_c A^T + B B^T and W_o = A^T W_o A + C^T C (discrete Lyapunov equations),
+    symmetrised against round-off.
+    """
+    A, B, C, _ = _as_siso(A, B, C, 0.0)
+    wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+    wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
+    return (wc + wc.T) / 2, (wo + wo.T) / 2
+
+
+def hankel_singular_values(A, B, C) -> np.ndarray:
+    """sigma_i = sqrt(eig(W_c W_o)), largest first, of a stable system.
+
+    A state whose sigma is far below the others contributes little to the
+    input-output behaviour; balanced truncation removes it with an error bound of
+    twice the sum of the removed sigmas.
+    """
+    if spectral_radius(A) >= 1.0:
+        raise ValueError("Hankel singular values need a stable model (all poles inside the unit circle)")
+    wc, wo = gramians(A, B, C)
+    values = np.sqrt(np.abs(np.linalg.eigvals(wc @ wo)))
+    return np.sort(values.real)[::-1]

@@ -83,3 +83,14 @@ def test_mat_export(tmp_path):
     data = scipy.io.loadmat(tmp_path / "m.mat")
     np.testing.assert_array_equal(data["A"], model.A)
     assert data["Ts"][0, 0] == pytest.approx(1 / 44100)
+
+
+def test_saved_files_get_the_ordinary_file_mode(tmp_path):
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        appendix_a_model("ff").save(tmp_path / "m.json")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "m.json").stat().st_mode & 0o777 == 0o644
