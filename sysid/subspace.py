@@ -162,6 +162,13 @@ class SubspaceDecomposition:
         u, s, _ = np.linalg.svd(scipy.linalg.solve_triangular(self.k, l22, lower=True))
         self.singular_values = s
         self._u = u
+        # 4. (for every order at once) O_n = K U[:, :n] are nested, so one QR of the
+        # largest O[:-1] = Q R gives every shift-property solution
+        # A_n = R[:n, :n]^-1 (Q^T O[1:])[:n, :n].
+        observability = self.k @ u[:, : q - 1]
+        self._shift_q, self._shift_r = np.linalg.qr(observability[:-1])
+        self._shift_rhs = self._shift_q.T @ observability[1:]
+        self._observability = observability
 
     @property
     def max_order(self) -> int:
@@ -171,8 +178,13 @@ class SubspaceDecomposition:
         """A and C of order n (step 4)."""
         if not 1 <= n <= self.max_order:
             raise IdentificationError(f"order must be between 1 and q-1 = {self.max_order}; found {n}")
-        o = self.k @ self._u[:, :n]
-        A = np.linalg.lstsq(o[:-1], o[1:], rcond=None)[0]
+        o = self._observability[:, :n]
+        r = self._shift_r[:n, :n]
+        diagonal = np.abs(np.diag(r))
+        if diagonal.min() > 1e-10 * diagonal.max():
+            A = scipy.linalg.solve_triangular(r, self._shift_rhs[:n, :n], check_finite=False)
+        else:  # O[:-1] is (nearly) rank deficient: let least squares pick the minimum-norm A.
+            A = np.linalg.lstsq(o[:-1], o[1:], rcond=None)[0]
         return A, o[:1]
 
     def fit_if_stable(self, n: int) -> SubspaceFit | None:

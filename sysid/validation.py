@@ -10,7 +10,7 @@ seed's RMS (section 3.3.2) with the missing square restored.
 
 The grid search evaluates thousands of candidate models on tens of thousands of
 sweep bins. ``CompressedValidation`` makes that cheap without giving up the
-definition: within narrow cells (1 Hz by default) a model's response is taken as
+definition: within narrow cells (2 Hz by default) a model's response is taken as
 linear in frequency, so the error energy is a quadratic form in the response at
 the cell edges whose coefficients (moments of |U|^2, conj(Y) U, |Y|^2) are summed
 once. The approximation error is of order (cell width / mode bandwidth)^2; the
@@ -76,7 +76,7 @@ def rms_from_responses(spectra: list[SweepSpectrum], responses: list[np.ndarray]
 class CompressedValidation:
     """Validation rms of many models from their responses on a coarse frequency grid."""
 
-    def __init__(self, spectra: list[SweepSpectrum], cell_hz: float = 1.0):
+    def __init__(self, spectra: list[SweepSpectrum], cell_hz: float = 2.0):
         f_lo = min(s.frequencies[0] for s in spectra)
         f_hi = max(s.frequencies[-1] for s in spectra)
         cells = max(1, int(np.ceil((f_hi - f_lo) / cell_hz)))
