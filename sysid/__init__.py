@@ -19,6 +19,10 @@ from .simulate import Session, SessionSpec, simulate_session, write_session
 from .spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
 from .subspace import SubspaceDecomposition, subspace_fit
 from .validation import noise_floor, simulated_rms
+from .compare import Comparison, compare, format_comparison
+from .diagnose import diagnose, format_findings
+from .refine import Refinement, format_refinement, refine, refine_auto
+from . import report  # write_report and the figures; matplotlib loads on first use
 
 __version__ = "0.1.0"
 
@@ -28,5 +32,6 @@ __all__ = [
     "appendix_a_model", "Recording", "check_same_rate", "load_recording", "recording_from_arrays",
     "Session", "SessionSpec", "simulate_session", "write_session", "estimate_spectra", "parzen_lag_window",
     "response", "smooth_spectra", "smoothed_response", "SubspaceDecomposition", "subspace_fit",
-    "noise_floor", "simulated_rms", "__version__",
+    "noise_floor", "simulated_rms", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
+    "Refinement", "refine", "refine_auto", "format_refinement", "report", "__version__",
 ]

@@ -33,7 +33,7 @@ from . import lti
 from .errors import IdentificationError
 from .recordings import Recording
 
-__all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis"]
+__all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost"]
 
 
 @dataclass
@@ -110,9 +110,13 @@ class OutputErrorFit:
 
 
 class _Problem:
-    def __init__(self, data: BlockData, delay: int, feedthrough: bool, input_weight: np.ndarray | None = None):
+    def __init__(self, data: BlockData, delay: int, feedthrough: bool, prefilter: np.ndarray | None = None,
+                 input_noise_variance: float | np.ndarray | None = None):
         self.data, self.feedthrough = data, feedthrough
         self.u_delayed = data.U * data.z ** (-delay)
+        self.weight = np.ones(data.z.size) if prefilter is None else np.asarray(prefilter, dtype=complex)
+        self.u_delayed = self.u_delayed * self.weight
+        self.input_noise_variance = input_noise_variance
 
     def linear(self, poles):
         A = lti.real_block_diagonal(poles)
@@ -132,6 +136,35 @@ class _Problem:
         residual = rhs - real @ theta
         return A, C, theta, residual
 
+    def bias_compensated(self, poles):
+        """Linear parameters by bias-compensated least squares (errors in variables).
+
+        With input DFT noise N_k of variance s_k = E|N_k|^2 the normal matrix of the
+        input columns phi_k U_k is inflated by sum_k s_k |w_k|^2 phi_k^H phi_k, which
+        biases the gain low by 1/(1 + S_nn/S_uu) (effects.md, input-noise). Subtracting
+        that expectation (Stoica & Soderstrom's bias-eliminating least squares) removes
+        the bias; the poles are kept from the ordinary fit.
+        """
+        A = lti.real_block_diagonal(poles)
+        C = _output_row(A)
+        basis = modal_basis(A, C, self.data.z)
+        inputs = [basis]
+        if self.feedthrough:
+            inputs.append(np.ones((self.data.z.size, 1)))
+        phi = np.hstack(inputs)
+        regressor = np.hstack([phi * self.u_delayed[:, None], basis * self.data.z[:, None]])
+        real = np.vstack([regressor.real, regressor.imag])
+        rhs = np.concatenate([self.data.Y.real, self.data.Y.imag])
+        normal = real.T @ real
+        variance = np.broadcast_to(np.asarray(self.input_noise_variance, dtype=float), self.data.z.shape)
+        weighted = phi * np.sqrt(variance * np.abs(self.weight) ** 2)[:, None]
+        m = phi.shape[1]
+        normal[:m, :m] -= (weighted.conj().T @ weighted).real
+        theta = np.linalg.solve(normal, real.T @ rhs)
+        # Keep the column order of ``linear``: input columns of the modes, transient, then D.
+        order = list(range(basis.shape[1])) + list(range(m, m + basis.shape[1])) + list(range(basis.shape[1], m))
+        return A, C, theta[order], rhs - real @ theta
+
 
 def _output_row(A_block):
     from .subspace import _block_output_row
@@ -140,15 +173,22 @@ def _output_row(A_block):
 
 
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
-                        max_iterations: int = 60) -> OutputErrorFit:
-    """Refine a stable model's poles and zeros on raw DFT data; see the module docstring."""
+                        max_iterations: int = 60, prefilter: np.ndarray | None = None,
+                        input_noise_variance: float | np.ndarray | None = None) -> OutputErrorFit:
+    """Refine a stable model's poles and zeros on raw DFT data; see the module docstring.
+
+    ``prefilter`` (complex response at the data's bins) is a fixed factor F in series
+    in front of the fitted system: the fit is of Y = G F z^-d U, and the returned
+    (A, B, C, D) is G alone. ``input_noise_variance`` (E|N_k|^2 of the input DFT, per
+    bin or one value) switches the final linear step to bias-compensated least squares.
+    """
     poles = np.linalg.eigvals(np.asarray(A, dtype=float))
     if poles.size == 0:
         raise IdentificationError("output-error refinement needs a model of order at least 1")
     if np.max(np.abs(poles)) >= 1:
         raise IdentificationError("output-error refinement needs a stable starting model")
     params, pairs = _poles_to_params(poles)
-    problem = _Problem(data, delay, feedthrough)
+    problem = _Problem(data, delay, feedthrough, prefilter, input_noise_variance)
 
     def residual(x):
         return problem.linear(_params_to_poles(x, pairs))[3]
@@ -157,9 +197,25 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     # least_squares' "lm" counts iterations in max_nfev (its Jacobian calls come on top).
     with threadpool_limits(limits=1, user_api="blas"):
         result = scipy.optimize.least_squares(residual, params, method="lm", x_scale="jac", max_nfev=max_iterations)
-    x = result.x if np.sum(result.fun**2) <= np.sum(start**2) else params
-    A_new, C_new, theta, final = problem.linear(_params_to_poles(x, pairs))
+    # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
+    # result is not stable and the starting poles are kept instead.
+    stable = np.all(np.abs(_params_to_poles(result.x, pairs)) < 1.0)
+    x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
+    solve = problem.linear if input_noise_variance is None else problem.bias_compensated
+    A_new, C_new, theta, final = solve(_params_to_poles(x, pairs))
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
     D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])
     return OutputErrorFit(A_new, B_new, C_new, D_new, float(np.sum(start**2)), float(np.sum(final**2)), int(result.nfev))
+
+
+def linear_cost(A, data: BlockData, delay: int = 0, feedthrough: bool = False,
+                prefilter: np.ndarray | None = None) -> float:
+    """Output-error cost sum_k |Y_k - model_k|^2 with the poles of A held fixed.
+
+    Only the linear least-squares step of the variable projection: cheap enough to
+    scan a structure parameter (a delay, a corner frequency) before refining.
+    """
+    poles = np.linalg.eigvals(np.asarray(A, dtype=float))
+    residual = _Problem(data, delay, feedthrough, prefilter).linear(poles)[3]
+    return float(np.sum(residual**2))

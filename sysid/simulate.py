@@ -15,16 +15,43 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.interpolate
 import scipy.signal
 
+from .effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .errors import HelmetAncError
 from .model import Model, atomic_write_text
 from .plants import appendix_a_model
 from .recordings import Recording, write_wav16
+from .structures import highpass_factor, lowpass_factor, resonance_factor, series, tf_to_statespace
 
-__all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT"]
+__all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
+           "SIMULATED_EFFECTS"]
 
 TRUTH_FORMAT = "helmet-anc/truth@1"
+
+# Hidden effects of a synthetic session and their parameters (typical values: effects.md).
+SIMULATED_EFFECTS = {
+    "delay": (ParameterSpec("samples", 23, 1, 2000, "int"),),
+    "resonance": (ParameterSpec("f0_hz", 3400.0, 20.0, 22000.0), ParameterSpec("q", 8.0, 0.5, 200.0),
+                  ParameterSpec("gain_db", 10.0, -30.0, 30.0)),
+    "highpass": (ParameterSpec("corner_hz", 60.0, 1.0, 5000.0), ParameterSpec("order", 1, 1, 2, "int")),
+    "lowpass": (ParameterSpec("corner_hz", 2500.0, 50.0, 22000.0), ParameterSpec("order", 2, 1, 2, "int")),
+    # Harmonic levels (dB re the fundamental) of a sine at the session's largest input amplitude.
+    "input-nonlinearity": (ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0)),
+    # Lines at k * frequency_hz, k = 1..harmonics, RMS level / k (FS) each.
+    "periodic-disturbance": (ParameterSpec("frequency_hz", 50.0, 1.0, 22000.0), ParameterSpec("harmonics", 3, 1, 40, "int"),
+                             ParameterSpec("level", 1e-3, 0.0, 0.5)),
+    # Input-channel SNR (dB) inside the noise excitation's band; the noise itself is white.
+    "input-noise": (ParameterSpec("snr_db", 10.0, -20.0, 80.0),),
+    "dc-offset": (ParameterSpec("level", 0.01, -0.5, 0.5), ParameterSpec("channel", 1, 0, 1, "int")),
+    # Clean ear-signal peak relative to full scale; the 16-bit converter clips above 1.
+    "clipping": (ParameterSpec("peak", 1.3, 1.0, 8.0),),
+    # Gain change below corner_hz from the start to the end of the session (a changing leak).
+    "time-variation": (ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0)),
+    # Ear-channel clock error relative to the input channel (parts per million).
+    "clock-drift": (ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
+}
 
 
 @dataclass(frozen=True)
@@ -75,40 +102,68 @@ def _quantise16(x: np.ndarray) -> np.ndarray:
     return np.clip(np.round(x * 32768.0), -32768, 32767) / 32768.0
 
 
-def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None) -> Session:
-    """Simulate a session of the given spec; the plant defaults to the appendix-A model of spec.path."""
+def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None, effects=()) -> Session:
+    """Simulate a session of the given spec; the plant defaults to the appendix-A model of spec.path.
+
+    ``effects`` are ``EffectSpec`` objects or strings such as ``"delay:23"`` (see
+    ``SIMULATED_EFFECTS`` for each kind's parameters); ``truth["effects"]`` records them
+    with the derived values (input-polynomial coefficients, disturbance lines, ...).
+    """
     spec = spec or SessionSpec()
     if spec.path not in ("fb", "ff"):
         raise HelmetAncError(f"path must be 'fb' or 'ff'; found {spec.path!r}")
-    plant = plant or appendix_a_model(spec.path)
-    if plant.fs != spec.fs:
-        raise HelmetAncError(f"plant sample rate {plant.fs:g} Hz differs from the session's {spec.fs:g} Hz")
+    base = plant or appendix_a_model(spec.path)
+    if base.fs != spec.fs:
+        raise HelmetAncError(f"plant sample rate {base.fs:g} Hz differs from the session's {spec.fs:g} Hz")
+    hidden = _parse_effects(effects, spec.fs)
+    plant = _effective_plant(base, hidden)
     rng = np.random.default_rng(spec.seed)
+    # Effects draw from their own stream so a session without effects is unchanged.
+    effect_rng = np.random.default_rng([spec.seed, 7])
 
+    drift = hidden["clock-drift"]["ppm"] * 1e-6 if "clock-drift" in hidden else 0.0
+    margin = int(np.ceil(abs(drift) * spec.noise_duration * spec.fs)) + 8
     lowpass = scipy.signal.butter(8, spec.noise_cutoff, fs=spec.fs, output="sos")
     noise_in = scipy.signal.sosfilt(lowpass, rng.standard_normal(int(round(spec.noise_duration * spec.fs))))
     noise_in /= np.std(noise_in[int(spec.transient_s * spec.fs):])
     sweep_in = sweep_signal(spec)
 
-    # Scale each excitation so the clean ear signal peaks at peak_level.
-    noise_out = plant.simulate(noise_in)
-    sweep_out = plant.simulate(sweep_in)
-    noise_gain = spec.peak_level / np.max(np.abs(noise_out))
-    sweep_gain = spec.peak_level / np.max(np.abs(sweep_out))
+    # Scale each excitation so the clean ear signal of the linear plant peaks at peak_level.
+    linear = Model(path=plant.path, fs=plant.fs, A=plant.A, B=plant.B, C=plant.C, D=plant.D, delay=plant.delay)
+    noise_gain = spec.peak_level / np.max(np.abs(linear.simulate(noise_in)))
+    sweep_gain = spec.peak_level / np.max(np.abs(linear.simulate(sweep_in)))
     noise_gain = min(noise_gain, spec.peak_level / np.max(np.abs(noise_in)))
     sweep_gain = min(sweep_gain, spec.peak_level / np.max(np.abs(sweep_in)))
+    ear_peak = max(noise_gain * np.max(np.abs(linear.simulate(noise_in))), sweep_gain * np.max(np.abs(linear.simulate(sweep_in))))
+    records = _effect_records(hidden, spec, noise_gain, max(sweep_gain, noise_gain * float(np.max(np.abs(noise_in)))),
+                              float(ear_peak))
+    if "input-nonlinearity" in hidden:
+        plant.input_nonlinearity = records["input-nonlinearity"]["coefficients"]
 
-    def record(u_clean, y_clean):
-        u = _quantise16(u_clean + spec.input_noise * rng.standard_normal(u_clean.size))
-        y = _quantise16(y_clean + spec.output_noise * rng.standard_normal(y_clean.size))
+    lengths = [noise_in.size, sweep_in.size, sweep_in.size]
+    timeline = np.cumsum([0] + lengths)
+    input_noise = spec.input_noise
+    if "input-noise" in hidden:
+        input_noise = float(np.hypot(spec.input_noise, _input_noise_rms(hidden, spec, noise_gain)))
+
+    def record(index, u_clean):
+        # The plant sees the clean input; a tail of input lets a slow ear clock read past the end.
+        u_long = np.concatenate((u_clean, np.zeros(margin)))
+        if index == 0:
+            u_long[u_clean.size:] = noise_gain * scipy.signal.sosfilt(lowpass, effect_rng.standard_normal(margin))
+        y_long = plant.simulate(u_long)
+        y_clean = _hidden_output_effects(hidden, y_long, u_clean.size, timeline[index], timeline[-1], spec.fs,
+                                         records, effect_rng)
+        u = _quantise16(u_clean + input_noise * rng.standard_normal(u_clean.size) + _dc(hidden, 0))
+        y = _quantise16(y_clean + spec.output_noise * rng.standard_normal(y_clean.size) + _dc(hidden, 1))
         return u, y
 
-    u, y = record(noise_gain * noise_in, noise_gain * noise_out)
-    noise = Recording(u, y, spec.fs, "noise.wav")
+    u, y = record(0, noise_gain * noise_in)
+    noise = _recording(u, y, spec.fs, "noise.wav")
     sweeps = []
     for k in (1, 2):
-        u, y = record(sweep_gain * sweep_in, sweep_gain * sweep_out)
-        sweeps.append(Recording(u, y, spec.fs, f"sweep{k}.wav"))
+        u, y = record(k, sweep_gain * sweep_in)
+        sweeps.append(_recording(u, y, spec.fs, f"sweep{k}.wav"))
 
     truth = {
         "format": TRUTH_FORMAT,
@@ -116,9 +171,120 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
         "plant": plant.to_dict(),
         "noise_input_rms": float(noise_gain),
         "sweep_amplitude": float(sweep_gain),
-        "effects": [],
+        "effects": [dict(EffectSpec(kind, params).to_dict(), **records.get(kind, {})) for kind, params in hidden.items()],
     }
+    if hidden:
+        truth["base_plant"] = base.to_dict()
+    if "clipping" in hidden:
+        # What the ear channel records is the plant times the too-high preamp gain.
+        gain = records["clipping"]["ear_gain"]
+        truth["plant"].update(C=(plant.C * gain).tolist(), D=(plant.D * gain).tolist())
     return Session(spec, plant, noise, sweeps, truth)
+
+
+def _recording(u: np.ndarray, y: np.ndarray, fs: float, name: str) -> Recording:
+    """A Recording with the data-quality fields a loaded file would have."""
+    rails = (-1.0, 32767 / 32768.0)
+    clipped = tuple(float(np.count_nonzero((x <= rails[0]) | (x >= rails[1])) / x.size) for x in (u, y))
+    clipped = tuple(c if c * u.size >= 3 else 0.0 for c in clipped)
+    return Recording(u, y, fs, name, clipped, (0.0, 0.0))
+
+
+def _parse_effects(effects, fs: float) -> dict[str, dict]:
+    hidden: dict[str, dict] = {}
+    for effect in effects:
+        parsed = effect if isinstance(effect, EffectSpec) else parse_effect(effect, SIMULATED_EFFECTS)
+        if parsed.kind in hidden:
+            raise HelmetAncError(f"--effect {parsed.kind} given twice")
+        for name in ("f0_hz", "corner_hz", "frequency_hz"):
+            if name in parsed.params and parsed.params[name] >= fs / 2:
+                raise HelmetAncError(f"--effect {parsed.kind}: {name} must be below fs/2 = {fs / 2:g} Hz")
+        hidden[parsed.kind] = dict(parsed.params)
+    return hidden
+
+
+def _effective_plant(base: Model, hidden: dict[str, dict]) -> Model:
+    """The base plant with the hidden linear effects in series (delay, resonance, filters)."""
+    system = (base.A, base.B, base.C, base.D)
+    factors = []
+    if "resonance" in hidden:
+        p = hidden["resonance"]
+        factors.append(resonance_factor(p["f0_hz"], p["q"], p["gain_db"], base.fs))
+    if "highpass" in hidden:
+        factors.append(highpass_factor(hidden["highpass"]["corner_hz"], base.fs, hidden["highpass"]["order"]))
+    if "lowpass" in hidden:
+        factors.append(lowpass_factor(hidden["lowpass"]["corner_hz"], base.fs, hidden["lowpass"]["order"]))
+    for b, a in factors:
+        system = series(system, tf_to_statespace(b, a))
+    delay = base.delay + (hidden["delay"]["samples"] if "delay" in hidden else 0)
+    A, B, C, D = system
+    return Model(path=base.path, fs=base.fs, A=A, B=B, C=C, D=D, delay=delay,
+                 input_nonlinearity=base.input_nonlinearity, identification={"source": "simulated plant with hidden effects"})
+
+
+def _effect_records(hidden: dict[str, dict], spec: SessionSpec, noise_gain: float, peak_input: float,
+                    ear_peak: float) -> dict[str, dict]:
+    """Derived values of the hidden effects, recorded in the truth file."""
+    records: dict[str, dict] = {}
+    if "input-nonlinearity" in hidden:
+        # Harmonic levels hold for a sine at the session's largest input amplitude A:
+        # for u = A sin, a2 u^2 puts a2 A/2 at 2f and a3 u^3 puts a3 A^2/4 at 3f (relative to A).
+        p = hidden["input-nonlinearity"]
+        amplitude = peak_input
+        a2 = 2.0 * 10.0 ** (p["h2_db"] / 20.0) / amplitude
+        a3 = 4.0 * 10.0 ** (p["h3_db"] / 20.0) / amplitude**2
+        records["input-nonlinearity"] = {"coefficients": [1.0, float(a2), float(a3)], "reference_amplitude": float(amplitude)}
+    if "periodic-disturbance" in hidden:
+        p = hidden["periodic-disturbance"]
+        lines = [k * p["frequency_hz"] for k in range(1, p["harmonics"] + 1) if k * p["frequency_hz"] < spec.fs / 2]
+        # Harmonic k at level/k: mains hum and engine orders fall off with order.
+        records["periodic-disturbance"] = {"frequencies": lines, "levels": [p["level"] / k for k in range(1, len(lines) + 1)]}
+    if "input-noise" in hidden:
+        records["input-noise"] = {"input_noise_rms": _input_noise_rms(hidden, spec, noise_gain)}
+    if "clipping" in hidden:
+        records["clipping"] = {"ear_gain": float(hidden["clipping"]["peak"] / ear_peak)}
+    return records
+
+
+def _input_noise_rms(hidden: dict[str, dict], spec: SessionSpec, noise_gain: float) -> float:
+    """White input-channel noise RMS (full band) giving snr_db inside the excitation's band.
+
+    The excitation's density is about noise_gain^2 / noise_cutoff, white noise's
+    2 sigma^2 / fs (both one-sided, FS^2/Hz).
+    """
+    snr = 10.0 ** (hidden["input-noise"]["snr_db"] / 10.0)
+    return float(noise_gain * np.sqrt(spec.fs / (2.0 * spec.noise_cutoff * snr)))
+
+
+def _dc(hidden: dict[str, dict], channel: int) -> float:
+    p = hidden.get("dc-offset")
+    return p["level"] if p is not None and p["channel"] == channel else 0.0
+
+
+def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng) -> np.ndarray:
+    """The ear signal of one recording (n samples from session sample ``start``) with the output-side effects."""
+    if "clock-drift" in hidden:
+        # The ear channel's clock runs (1 + ppm 1e-6) fast: sample k is taken at k (1 + eps).
+        eps = hidden["clock-drift"]["ppm"] * 1e-6
+        spline = scipy.interpolate.CubicSpline(np.arange(y_long.size), y_long)
+        y = spline(np.arange(n) * (1.0 + eps))
+    else:
+        y = y_long[:n].copy()
+    if "time-variation" in hidden:
+        # The leak changes the gain below corner_hz linearly over the whole session.
+        p = hidden["time-variation"]
+        depth = 10.0 ** (p["change_db"] / 20.0) - 1.0
+        ramp = depth * ((start + np.arange(n)) / total - 0.5)
+        low = scipy.signal.sosfilt(scipy.signal.butter(2, p["corner_hz"], fs=fs, output="sos"), y)
+        y = y + ramp * low
+    if "clipping" in hidden:
+        y = y * records["clipping"]["ear_gain"]
+    if "periodic-disturbance" in hidden:
+        t = np.arange(n) / fs
+        lines = records["periodic-disturbance"]
+        for f, level in zip(lines["frequencies"], lines["levels"]):
+            y = y + np.sqrt(2.0) * level * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
+    return y
 
 
 def write_session(session: Session, outdir) -> dict[str, Path]:

@@ -125,3 +125,17 @@ def test_clipping_is_reported_as_a_warning_not_an_error(session_files, tmp_path,
     code, out, err = _run(capsys, *_identify_args(dict(session_files, sweep1=tmp_path / "clipped.wav"), tmp_path / "m.json"))
     assert code == 0
     assert "helmet-anc: warning: " in err and "clipped.wav: output channel clipped" in err
+
+
+def test_identify_report_to_a_missing_folder_is_refused_before_any_work(session_files, tmp_path, capsys):
+    code, _, err = _run(capsys, *_identify_args(session_files, tmp_path / "m.json", "--report", tmp_path / "nowhere" / "r.html"))
+    _assert_one_line_error(code, err, "does not exist")
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_identify_writes_its_report_into_a_folder(session_files, tmp_path, capsys):
+    (tmp_path / "reports").mkdir()
+    code, out, err = _run(capsys, *_identify_args(session_files, tmp_path / "m.json", "--report", tmp_path / "reports"))
+    assert code == 0, err
+    html = (tmp_path / "reports" / "ff-report.html").read_text()
+    assert html.count("<img") >= 10 and "http://" not in html and "https://" not in html

@@ -9,7 +9,7 @@ from ..errors import HelmetAncError
 from ..identify import Identification
 from ..recordings import load_recording
 
-__all__ = ["add_recording_options", "load_sweeps", "check_output", "identification_summary"]
+__all__ = ["add_recording_options", "load_sweeps", "check_output", "check_report_target", "identification_summary"]
 
 
 def add_recording_options(parser: argparse.ArgumentParser, noise: bool = True) -> None:
@@ -35,6 +35,14 @@ def check_output(path: str) -> Path:
     if target.is_dir():
         raise HelmetAncError(f"{target}: is a folder; give a file name")
     return target
+
+
+def check_report_target(path: str | None) -> Path | None:
+    """The --report target: an existing folder, or a file whose folder exists (checked before any work)."""
+    if path is None:
+        return None
+    target = Path(path)
+    return target if target.is_dir() else check_output(path)
 
 
 def identification_summary(result: Identification) -> str:

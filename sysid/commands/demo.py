@@ -1,6 +1,8 @@
 """``helmet-anc demo``: the whole job on built-in synthetic sessions of both paths.
 
-Simulates a session of each appendix-A plant, identifies both paths, and generates
+Simulates a session of each appendix-A plant and identifies both paths; then shows
+the diagnose -> refine loop on a re-measured FF session that hides a converter delay
+and mains hum the model does not know; writes an HTML report per model; and generates
 and verifies the board's C filters for both models (host build, every sweep sample).
 """
 
@@ -15,6 +17,10 @@ from ..model import atomic_write_text
 from ..simulate import SessionSpec, simulate_session, write_session
 from .common import identification_summary
 
+# The hidden effects of the demo's second FF session: 23 samples of extra converter
+# latency (about 18 cm of sound path) and 50 Hz mains hum with its harmonics.
+DEMO_EFFECTS = ("delay:23", "periodic-disturbance")
+
 ORDER = 90
 
 
@@ -23,6 +29,7 @@ def register(commands) -> None:
     parser.add_argument("outdir", nargs="?", default="helmet-anc-demo")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-firmware", action="store_true", help="skip the C generation and verification")
+    parser.add_argument("--no-report", action="store_true", help="skip the HTML reports")
     parser.set_defaults(handler=run)
 
 
@@ -32,6 +39,26 @@ def _firmware(model, outdir: Path, sweep_files) -> str:
 
     manifest = generate_firmware(model, outdir, variant="both", sweeps=[str(f) for f in sweep_files])
     return format_verification_table(manifest)
+
+
+def _refinement_loop(model, outdir: Path, seed: int):
+    """Diagnose the FF model on a session with hidden effects, refine until done, print each step."""
+    from ..compare import compare
+    from ..diagnose import diagnose, format_findings
+    from ..refine import format_refinement, refine_auto
+
+    session = simulate_session(SessionSpec(path="ff", seed=seed + 1), effects=DEMO_EFFECTS)
+    write_session(session, outdir / "ff-remeasured")
+    before = compare(model, session.sweeps)
+    print(f"\ndiagnose: the FF model on a re-measured session ({outdir}/ff-remeasured/, hidden effects kept "
+          f"in truth.json): rms {before.rms:.3e} FS = {before.rms / before.noise_floor:.1f}x the noise floor")
+    print(format_findings(diagnose(model, session.noise, session.sweeps, comparison=before)))
+    refined, steps = refine_auto(model, session.noise, session.sweeps)
+    print("refine --auto:")
+    print(format_refinement(steps))
+    refined.save(outdir / "ff_refined_model.json")
+    print(f"refined model written to {outdir}/ff_refined_model.json")
+    return refined, session
 
 
 def run(args) -> int:
@@ -47,12 +74,23 @@ def run(args) -> int:
         result.model.save(outdir / f"{path}_model.json")
         atomic_write_text(outdir / f"{path}_model.grid.csv", result.grid.to_csv())
         print(identification_summary(result))
-        models[path] = (result.model, files)
+        models[path] = (result.model, files, result, session)
     print(f"models written to {outdir}/fb_model.json and {outdir}/ff_model.json")
+    refined = _refinement_loop(models["ff"][0], outdir, args.seed)
+    if not args.no_report:
+        from ..report import write_report
+
+        (outdir / "reports").mkdir(exist_ok=True)
+        for path, (model, files, result, session) in models.items():
+            write_report(outdir / "reports" / f"{path}-report.html", model, session.noise, session.sweeps,
+                         identification=result)
+        model, session = refined
+        write_report(outdir / "reports" / "ff-refined-report.html", model, session.noise, session.sweeps)
+        print(f"\nHTML reports in {outdir}/reports/ (fb-report.html, ff-report.html, ff-refined-report.html)")
     if not args.no_firmware:
         print("\nfirmware: C filters generated and verified sample by sample on both sweeps (host build)")
         (outdir / "firmware").mkdir(exist_ok=True)
-        for path, (model, files) in models.items():
+        for path, (model, files, _, _) in models.items():
             print(_firmware(model, outdir / "firmware" / path, (files["sweep1"], files["sweep2"])))
         print(f"C sources and manifests in {outdir}/firmware/")
     return 0

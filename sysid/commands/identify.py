@@ -7,7 +7,7 @@ from ..identify import IdentificationOptions, identify
 from ..model import atomic_write_text
 from ..recordings import load_recording
 from ..spectra import ESTIMATORS
-from .common import add_recording_options, check_output, identification_summary, load_sweeps
+from .common import add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
 
 ORDER = 20
 
@@ -22,6 +22,7 @@ def register(commands) -> None:
     parser.add_argument("--no-refine", action="store_true", help="stop at the seed's grid choice")
     parser.add_argument("--feedthrough", action="store_true", help="estimate a direct term D (default D = 0)")
     parser.add_argument("--mat", metavar="FILE.mat", help="also export the model for MATLAB")
+    parser.add_argument("--report", metavar="PATH", help="also write the HTML report (a file, or a folder for <path>-report.html)")
     parser.add_argument("-o", "--output", required=True, metavar="model.json")
     parser.set_defaults(handler=run)
 
@@ -29,6 +30,7 @@ def register(commands) -> None:
 def run(args) -> int:
     output = check_output(args.output)
     mat = check_output(args.mat) if args.mat else None
+    report_target = check_report_target(args.report)
     options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
                                     feedthrough=args.feedthrough)
@@ -40,6 +42,11 @@ def run(args) -> int:
     atomic_write_text(table, result.grid.to_csv())
     if mat:
         result.model.save_mat(mat)
+    if report_target:
+        from ..report import write_report
+
+        report = write_report(report_target, result.model, noise, sweeps, identification=result)
+        print(f"wrote {report}")
     print(identification_summary(result))
     print(f"wrote {output} and {table}" + (f" and {mat}" if mat else ""))
     return 0

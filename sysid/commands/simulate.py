@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from ..errors import HelmetAncError
-from ..simulate import SessionSpec, simulate_session, write_session
+from ..effect_spec import parse_effect
+from ..simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
 
 ORDER = 10
 
@@ -17,6 +18,8 @@ def register(commands) -> None:
     parser.add_argument("--sweep-seconds", type=float, default=5.0)
     parser.add_argument("--output-noise", type=float, default=2e-4, help="ear-microphone noise RMS (FS)")
     parser.add_argument("--input-noise", type=float, default=2e-5, help="input-channel noise RMS (FS)")
+    parser.add_argument("--effect", action="append", default=[], metavar="KIND[:PARAMS]",
+                        help="hidden effect, repeatable: " + ", ".join(SIMULATED_EFFECTS) + " (e.g. delay:23, resonance:3400,8,10)")
     parser.set_defaults(handler=run)
 
 
@@ -29,6 +32,7 @@ def run(args) -> int:
         raise HelmetAncError(f"--sweep-seconds must be above 0.1; found {args.sweep_seconds:g}")
     if args.output_noise < 0 or args.input_noise < 0:
         raise HelmetAncError("noise levels must be non-negative")
-    files = write_session(simulate_session(spec), args.outdir)
+    effects = [parse_effect(text, SIMULATED_EFFECTS) for text in args.effect]
+    files = write_session(simulate_session(spec, effects=effects), args.outdir)
     print(f"wrote {', '.join(str(p) for p in files.values())}")
     return 0

@@ -1,0 +1,55 @@
+"""``helmet-anc refine``: add a named effect's structure (or let ``--auto`` choose) and re-identify."""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import HelmetAncError
+from ..model import Model
+from ..recordings import load_recording
+from ..refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
+from .common import add_recording_options, check_output, check_report_target, load_sweeps
+
+ORDER = 32
+
+
+def register(commands) -> None:
+    parser = commands.add_parser("refine", help="add an effect to a model and re-identify; --auto follows diagnose")
+    parser.add_argument("model", metavar="MODEL.json")
+    add_recording_options(parser)
+    parser.add_argument("--add", action="append", default=[], metavar="EFFECT[:PARAMS]",
+                        help="structure to add, repeatable: " + ", ".join(REFINE_EFFECTS) + " (e.g. delay:23)")
+    parser.add_argument("--auto", action="store_true", help="diagnose, add the top finding, refit, until done")
+    parser.add_argument("--report", metavar="PATH", help="also write the HTML report of the refined model (file or folder)")
+    parser.add_argument("-o", "--output", required=True, metavar="NEW.json")
+    parser.set_defaults(handler=run)
+
+
+def run(args) -> int:
+    if bool(args.add) == bool(args.auto):
+        raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
+    specs = [parse_refinement(text) for text in args.add]
+    output = check_output(args.output)
+    report_target = check_report_target(args.report)
+    model = Model.load(args.model)
+    noise = load_recording(args.noise, args.input_channel, args.output_channel)
+    sweeps = load_sweeps(args)
+    if args.auto:
+        model, steps = refine_auto(model, noise, sweeps)
+    else:
+        steps = []
+        for spec in specs:
+            result = refine(model, noise, sweeps, spec)
+            steps.append(result.step)
+            model = result.model
+            if result.step["worse"]:
+                sys.stderr.write(f"helmet-anc refine: warning: adding {spec.kind} raised the validation rms from "
+                                 f"{result.step['rms_before']:.3e} to {result.step['rms_after']:.3e} FS\n")
+    model.save(output)
+    print(format_refinement(steps))
+    print(f"wrote {output}")
+    if report_target:
+        from ..report import write_report
+
+        print(f"wrote {write_report(report_target, model, noise, sweeps)}")
+    return 0

@@ -1,0 +1,219 @@
+"""Compare a model with the measured sweeps: fit, error against the noise floor, residual tests.
+
+The model is simulated on each measured sweep input (from rest); the residual is
+measured minus predicted ear signal after the first ``SKIP_S`` of each sweep.
+When the model carries a disturbance model, sinusoids at its frequencies are
+fitted to each recording's residual and removed, from the residual and from the
+ear signals that give the noise floor (a disturbance is not coherent between
+repeats, so it would otherwise count as noise).
+
+Figures (design.md, "Compare, diagnose, refine"; full-scale units):
+
+- ``fit_percent`` = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) over both sweeps,
+  the NRMSE fit of MATLAB's ``compare``;
+- ``rms`` in the validation band via Parseval (``sysid.validation``), ``rms_full``
+  without the band limit, ``noise_floor`` from the two repeats;
+- third-octave bands 20 Hz - 5 kHz: error and noise RMS and their ratio;
+- residual tests of Ljung (System Identification, 2nd ed., section 16.6) as
+  MATLAB ``resid``: normalised autocorrelation r_e(k)/r_e(0), k = 0..M-1, with
+  the 99 % bound 2.58/sqrt(N); residual-input cross-correlation
+  r_eu(k) = (1/N) sum_t e(t) u(t-k), k = -M+1..M-1, normalised by
+  sqrt(r_e(0) r_u(0)), with the bound 2.58 sqrt(P) / (sqrt(N) sqrt(r_e(0) r_u(0))),
+  P = r_e(0) r_u(0) + 2 sum_{k=1}^{M-1} r_e(k) r_u(k) (effects.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import IdentificationError
+from .recordings import Recording, check_same_rate
+from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, noise_floor
+
+__all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "fit_sinusoids", "LAGS", "BOUND_99"]
+
+LAGS = 25
+BOUND_99 = 2.58
+
+
+def third_octave_bands(low: float = 20.0, high: float = 5000.0) -> list[tuple[float, float, float]]:
+    """(center, lower, upper) edges in Hz of the base-10 third-octave bands (IEC 61260) from low to high."""
+    bands = []
+    for k in range(-20, 12):
+        center = 1000.0 * 10.0 ** (k / 10.0)
+        if low / 1.05 <= center <= high * 1.05:
+            bands.append((center, center * 10.0 ** (-0.05), center * 10.0 ** 0.05))
+    return bands
+
+
+def fit_sinusoids(x: np.ndarray, frequencies, fs: float) -> np.ndarray:
+    """Least-squares fit of sinusoids at the given frequencies (Hz) to x; returns the fitted signal.
+
+    Each line gets cos/sin columns and the same multiplied by centred time, so a
+    small frequency error or a slow amplitude change of the line is absorbed too.
+    """
+    frequencies = list(frequencies or [])
+    if not frequencies or x.size < 8:
+        return np.zeros_like(x)
+    t = (np.arange(x.size) - x.size / 2) / fs
+    columns = []
+    span = t[-1] - t[0]
+    for f in frequencies:
+        phase = 2 * np.pi * f * t
+        c, s = np.cos(phase), np.sin(phase)
+        columns += [c, s, c * t / span, s * t / span]
+    regressor = np.stack(columns, axis=1)
+    theta, *_ = np.linalg.lstsq(regressor, x, rcond=None)
+    return regressor @ theta
+
+
+@dataclass
+class Comparison:
+    """What ``compare`` measures; see the module docstring for definitions and units."""
+
+    fit_percent: float
+    rms: float
+    rms_full: float
+    noise_floor: float
+    bands: list[dict]
+    lags: np.ndarray
+    residual_autocorrelation: np.ndarray
+    autocorrelation_bound: float
+    cross_lags: np.ndarray
+    residual_input_crosscorrelation: np.ndarray
+    crosscorrelation_bound: np.ndarray
+    per_sweep: list[dict] = field(default_factory=list)
+
+    @property
+    def ratio(self) -> float:
+        """Validation rms over the noise floor (1 = as good as the data allow)."""
+        return self.rms / self.noise_floor if self.noise_floor > 0 else float("inf")
+
+    def to_dict(self) -> dict:
+        """JSON-safe summary: scalars, band table and correlation sequences (no signals)."""
+        return {
+            "fit_percent": float(self.fit_percent),
+            "rms": float(self.rms),
+            "rms_full": float(self.rms_full),
+            "noise_floor": float(self.noise_floor),
+            "bands": [{key: float(value) for key, value in band.items()} for band in self.bands],
+            "lags": [int(k) for k in self.lags],
+            "residual_autocorrelation": [float(v) for v in self.residual_autocorrelation],
+            "autocorrelation_bound": float(self.autocorrelation_bound),
+            "cross_lags": [int(k) for k in self.cross_lags],
+            "residual_input_crosscorrelation": [float(v) for v in self.residual_input_crosscorrelation],
+            "crosscorrelation_bound": [float(v) for v in self.crosscorrelation_bound],
+            "sweeps": [{"path": s["path"], "samples": int(s["residual"].size), "fs": float(s["fs"])} for s in self.per_sweep],
+        }
+
+
+def _correlation(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    """sum_t a(t) b(t - k) for each lag k (no normalisation); a few lags, so direct sums."""
+    n = a.size
+    return np.array([float(np.dot(a[k:], b[:n - k])) if k >= 0 else float(np.dot(a[:n + k], b[-k:])) for k in lags])
+
+
+def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LAGS) -> Comparison:
+    """Compare ``model`` with the two repeated sweep recordings; see the module docstring."""
+    if len(sweeps) != 2:
+        raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
+    fs = check_same_rate(sweeps)
+    if fs != model.fs:
+        raise IdentificationError(f"model sample rate {model.fs:g} Hz differs from the sweeps' {fs:g} Hz")
+    first = int(round(SKIP_S * fs))
+    per_sweep = []
+    cleaned = []
+    for sweep in sweeps:
+        predicted = model.simulate(sweep.u)
+        residual = sweep.y - predicted
+        disturbance = fit_sinusoids(residual[first:], model.disturbance_frequencies, fs)
+        disturbance = np.concatenate((np.zeros(first), disturbance))[: residual.size]
+        predicted = predicted + disturbance
+        residual = residual - disturbance
+        per_sweep.append({"path": sweep.path, "u": sweep.u, "measured": sweep.y, "predicted": predicted,
+                          "residual": residual, "fs": fs})
+        cleaned.append(Recording(sweep.u, sweep.y - disturbance, fs, sweep.path))
+
+    tails = [s["residual"][first:] for s in per_sweep]
+    measured = [c.y[first:] for c in cleaned]
+    total = sum(t.size for t in tails)
+    energy_band = sum(band_rms(t, fs, band) ** 2 * t.size for t in tails)
+    rms = float(np.sqrt(energy_band / total))
+    rms_full = float(np.sqrt(sum(np.sum(t**2) for t in tails) / total))
+    centred = np.concatenate(measured)
+    fit_percent = float(100.0 * (1.0 - np.linalg.norm(np.concatenate(tails)) / np.linalg.norm(centred - centred.mean())))
+    floor = noise_floor(cleaned[0], cleaned[1], band)
+
+    bands = _band_table(tails, cleaned, fs, first)
+    lag_axis = np.arange(lags)
+    cross_axis = np.arange(-lags + 1, lags)
+    r_e = np.zeros(lags)
+    r_u = np.zeros(lags)
+    r_eu = np.zeros(cross_axis.size)
+    for s, e in zip(per_sweep, tails):
+        e = e - e.mean()
+        u = s["u"][first:] - s["u"][first:].mean()
+        r_e += _correlation(e, e, lag_axis)
+        r_u += _correlation(u, u, lag_axis)
+        r_eu += _correlation(e, u, cross_axis)
+    r_e, r_u, r_eu = r_e / total, r_u / total, r_eu / total
+    scale = np.sqrt(r_e[0] * r_u[0]) if r_e[0] > 0 and r_u[0] > 0 else 1.0
+    autocorrelation = r_e / r_e[0] if r_e[0] > 0 else np.zeros(lags)
+    p = r_e[0] * r_u[0] + 2.0 * float(np.sum(r_e[1:] * r_u[1:]))
+    cross_bound = BOUND_99 * np.sqrt(max(p, 0.0)) / (np.sqrt(total) * scale)
+    return Comparison(fit_percent, rms, rms_full, floor, bands, lag_axis, autocorrelation, BOUND_99 / np.sqrt(total),
+                      cross_axis, r_eu / scale, np.full(cross_axis.size, cross_bound), per_sweep)
+
+
+class _BandEnergy:
+    """Band-limited energy sum_t x_band(t)^2 of one signal from a single FFT (Parseval)."""
+
+    def __init__(self, x: np.ndarray, fs: float):
+        self.power = np.abs(np.fft.rfft(x)) ** 2
+        self.frequencies = np.fft.rfftfreq(x.size, 1 / fs)
+        self.size = x.size
+
+    def energy(self, low: float, high: float) -> float:
+        inside = (self.frequencies >= low) & (self.frequencies <= high)
+        return band_energy(np.sqrt(self.power[inside]), self.size)
+
+
+def _band_table(tails, cleaned, fs, first) -> list[dict]:
+    """Error and noise RMS in each third-octave band (noise from the repeat difference)."""
+    half = [c.y[first:] for c in cleaned]
+    n = min(h.size for h in half)
+    difference = _BandEnergy((half[0][:n] - half[1][:n]) / np.sqrt(2.0), fs)
+    errors = [_BandEnergy(t, fs) for t in tails]
+    total = sum(t.size for t in tails)
+    rows = []
+    for center, low, high in third_octave_bands():
+        error = float(np.sqrt(sum(e.energy(low, high) for e in errors) / total))
+        noise = float(np.sqrt(difference.energy(low, high) / n))
+        rows.append({"center_hz": center, "low_hz": low, "high_hz": high, "error_rms": error, "noise_rms": noise,
+                     "ratio": error / noise if noise > 0 else float("inf")})
+    return rows
+
+
+def format_comparison(comparison: Comparison, name: str = "model") -> str:
+    """A terminal table: headline figures, then per band error vs noise with a bar in dB."""
+    c = comparison
+    lines = [
+        f"{name}: fit {c.fit_percent:.2f} %, rms {c.rms:.3e} FS in band, {c.rms_full:.3e} FS full band, "
+        f"noise floor {c.noise_floor:.3e} FS ({c.ratio:.2f}x floor)",
+        "  band (Hz)        error (FS)   noise (FS)   ratio   error over noise, 1 char = 2 dB",
+    ]
+    for band in c.bands:
+        ratio = band["ratio"]
+        db = 20 * np.log10(ratio) if ratio > 0 and np.isfinite(ratio) else 0.0
+        bar = "#" * int(min(max(db, 0.0), 60.0) / 2)
+        flag = "  <-- above the noise floor" if ratio > 2.0 else ""
+        lines.append(f"  {band['center_hz']:8.0f}  {band['error_rms']:12.3e} {band['noise_rms']:12.3e} {ratio:7.2f}   {bar}{flag}")
+    worst = int(np.argmax(np.abs(c.residual_input_crosscorrelation) / c.crosscorrelation_bound))
+    auto_out = int(np.sum(np.abs(c.residual_autocorrelation[1:]) > c.autocorrelation_bound))
+    cross_out = int(np.sum(np.abs(c.residual_input_crosscorrelation) > c.crosscorrelation_bound))
+    lines.append(f"  residual whiteness: {auto_out} of {c.lags.size - 1} lags outside the 99 % bound; "
+                 f"residual-input correlation: {cross_out} of {c.cross_lags.size} lags outside "
+                 f"(largest at lag {int(c.cross_lags[worst])})")
+    return "\n".join(lines)

@@ -1,0 +1,94 @@
+"""Diagnose what a model misses: ranked findings, each naming a physical effect (design.md).
+
+``diagnose(model, noise, sweeps)`` compares the model with the sweeps
+(``sysid.compare``) and runs one detector per effect (``sysid.findings``):
+
+- data quality, straight from the recordings: ``dc-offset``, ``clipping``;
+- the plant: ``delay`` (fixed-pole delay scan), ``input-nonlinearity`` (residual
+  against u^2, u^3 through the path);
+- the data, not the plant: ``periodic-disturbance`` (residual lines absent from the
+  input), ``input-noise`` (input noise from the repeated sweeps, H1 bias),
+  ``clock-drift`` and ``time-variation`` (segments of the noise recording).
+
+Findings are sorted significant first, then by score; on data with no missing
+effect nothing is significant. A resonance, high-pass or low-pass factor is not
+named here: a low-order fit spreads its error over the whole band, and telling
+them apart needs refits per candidate; ``refine --add`` adds them with given
+parameters.
+"""
+
+from __future__ import annotations
+
+import time
+
+
+from .compare import compare
+from .errors import IdentificationError
+from .findings import DiagnosisContext
+from .findings.data_quality import clipping_finding, dc_offset_finding
+from .findings.delay import delay_finding
+from .findings.disturbance import disturbance_finding
+from .findings.input_noise import input_noise_finding
+from .findings.nonlinearity import nonlinearity_finding
+from .findings.variation import clock_drift_finding, time_variation_finding
+from .model import Model
+from .recordings import Recording, check_same_rate
+
+__all__ = ["diagnose", "Diagnosis", "format_findings", "DETECTORS"]
+
+DETECTORS = (dc_offset_finding, clipping_finding, delay_finding, nonlinearity_finding, disturbance_finding,
+             input_noise_finding, clock_drift_finding, time_variation_finding)
+
+
+class Diagnosis(list):
+    """The ranked findings (a list of dicts) with the comparison they were based on."""
+
+    def __init__(self, findings, comparison, seconds: float):
+        super().__init__(findings)
+        self.comparison = comparison
+        self.seconds = seconds
+
+    @property
+    def significant(self) -> list[dict]:
+        return [f for f in self if f["significant"]]
+
+
+def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_s: float = 3.0,
+             comparison=None) -> Diagnosis:
+    """Ranked findings for ``model`` on one noise recording and two repeated sweeps."""
+    t0 = time.perf_counter()
+    if len(sweeps) != 2:
+        raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
+    check_same_rate([noise, *sweeps])
+    if noise.duration <= transient_s + 0.5:
+        raise IdentificationError(f"{noise.path}: shorter than the {transient_s:g} s transient plus 0.5 s")
+    comparison = comparison or compare(model, sweeps)
+    ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
+    findings = [detector(ctx) for detector in DETECTORS]
+    findings.sort(key=lambda f: (not f["significant"], -f["score"]))
+    return Diagnosis(findings, comparison, time.perf_counter() - t0)
+
+
+def format_findings(findings, limit: int | None = None) -> str:
+    """Terminal listing: significant findings with explanation and remedy, then the rest in one line."""
+    significant = [f for f in findings if f["significant"]]
+    lines = []
+    if not significant:
+        lines.append("no significant finding: nothing the data show is missing from the model")
+    for rank, f in enumerate(significant[:limit], start=1):
+        params = ", ".join(f"{k} {_short(v)}" for k, v in f["params"].items())
+        lines.append(f"{rank}. {f['effect']} (score {f['score']:.1f}): {params}")
+        lines.append(f"   {f['explanation']}")
+        lines.append(f"   remedy: {f['remedy']}")
+    rest = [f"{f['effect']} {f['score']:.2f}" for f in findings if not f["significant"]]
+    if rest:
+        lines.append("not significant (score < 1): " + ", ".join(rest))
+    return "\n".join(lines)
+
+
+def _short(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_short(v) for v in value[:6]) + (", ...]" if len(value) > 6 else "]")
+    return str(value)

@@ -1,0 +1,344 @@
+"""Refine a model: add the structure of one physical effect and re-identify (design.md).
+
+Structures (the model chain is [input polynomial] -> [z^-delay] -> (A, B, C, D)):
+
+- ``delay``: more samples of pure delay; the LTI core is re-identified on the
+  delayed input.
+- ``input-nonlinearity``: a Hammerstein input polynomial v = u + a2 u^2 + ...,
+  its coefficients by least squares on the noise recording through the current
+  linear part, then the core re-identified on v.
+- ``periodic-disturbance``: sinusoids at given frequencies, fitted per recording
+  and removed from the ear signal before the fit; kept in the model's disturbance
+  (not part of the plant) and removed again by ``compare``.
+- ``highpass`` / ``lowpass``: a fixed factor (``sysid.structures``) in series in front
+  of a re-identified core; the product becomes (A, B, C, D).
+- ``resonance``: one more mode (2 states) started at f0 and Q, all poles refined by
+  output error on the raw DFT data.
+- ``input-noise``: the errors-in-variables estimator: bias-compensated least squares
+  with the input noise density measured from the repeated sweeps
+  (``sysid.output_error``).
+
+Every refinement is validated with ``compare`` before and after and appended to the
+model's ``history``; a refit that is unstable raises, and one that makes the
+validation error worse is flagged (``step["worse"]``) and, in ``refine_auto``, rejected.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from .compare import Comparison, compare, fit_sinusoids
+from .diagnose import diagnose
+from .effect_spec import EffectSpec, ParameterSpec, parse_effect
+from .errors import IdentificationError
+from .findings.delay import scan_delay
+from .findings import DiagnosisContext
+from .findings.input_noise import input_noise_density
+from .findings.disturbance import disturbance_finding
+from .findings.nonlinearity import nonlinearity_finding
+from .identify import IdentificationOptions, identify
+from .model import Model
+from .output_error import block_data, refine_output_error
+from .recordings import Recording
+from .structures import highpass_factor, lowpass_factor, mode_block, series, tf_to_statespace
+
+__all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "refine", "refine_auto",
+           "format_refinement", "parse_refinement"]
+
+# Structures ``refine --add`` can add; a parameter left at None is estimated from the data.
+REFINE_EFFECTS = {
+    "delay": (ParameterSpec("samples", None, 1, 2000, "int"),),
+    "input-nonlinearity": (ParameterSpec("degree", 3, 2, 3, "int"),),
+    "periodic-disturbance": (ParameterSpec("frequencies_hz", None, 1.0, 22000.0, "list"),),
+    "input-noise": (ParameterSpec("input_noise_density", None, 0.0, 1.0),),
+    "highpass": (ParameterSpec("corner_hz", None, 1.0, 5000.0), ParameterSpec("order", 1, 1, 2, "int")),
+    "lowpass": (ParameterSpec("corner_hz", None, 50.0, 22000.0), ParameterSpec("order", 2, 1, 2, "int")),
+    "resonance": (ParameterSpec("f0_hz", None, 20.0, 22000.0), ParameterSpec("q", 10.0, 0.5, 200.0)),
+}
+NOT_REFINABLE = {
+    "dc-offset": "a DC offset is removed by the pipeline already; fix it at the preamplifier",
+    "clipping": "clipped samples cannot be modelled; re-record with less gain",
+    "time-variation": "a path that changes while recording has no single model; identify per condition",
+    "clock-drift": "clock drift is fixed by recording from one clock or resampling, not by the model",
+    "under-modelled": "raise the order with helmet-anc identify --orders",
+}
+# The re-identification's grid: the seed's orders, gamma step 30 (as the test sessions use).
+REFIT_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)), refine_seconds=5.0)
+# A refinement that raises the validation rms by more than this is called worse.
+WORSE = 1.02
+
+
+@dataclass
+class Refinement:
+    """One refinement: the new model, its history entry, and the comparisons before and after."""
+
+    model: Model
+    step: dict
+    before: Comparison
+    after: Comparison
+
+
+def parse_refinement(text: str) -> EffectSpec:
+    """Parse ``EFFECT[:PARAMS]`` for ``refine --add``; effects that are no model structure are refused."""
+    kind = str(text).partition(":")[0].strip().lower()
+    if kind in NOT_REFINABLE:
+        raise IdentificationError(f"--add {text!r}: {kind} is not a model structure ({NOT_REFINABLE[kind]})")
+    return parse_effect(text, REFINE_EFFECTS, "--add")
+
+
+def _shift(x: np.ndarray, d: int) -> np.ndarray:
+    return np.concatenate((np.zeros(min(d, x.size)), x[: max(x.size - d, 0)])) if d else x
+
+
+def _disturbance(model: Model, recording: Recording, frequencies) -> np.ndarray:
+    """Sinusoids at frequencies fitted to the recording's residual under ``model``."""
+    if not frequencies:
+        return np.zeros_like(recording.y)
+    return fit_sinusoids(recording.y - model.simulate(recording.u), frequencies, recording.fs)
+
+
+def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
+    """Recordings as the LTI core sees them: mapped input, ear signal without the disturbance."""
+    return [Recording(input_map(r.u), r.y - _disturbance(model, r, frequencies), r.fs, r.path) for r in recordings]
+
+
+def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s) -> Model:
+    recordings = _transformed(model, [noise, *sweeps], input_map, frequencies)
+    options = options or REFIT_OPTIONS
+    # Orders up to two above the model's: the added structure, not more order, should explain the data.
+    orders = tuple(n for n in options.orders if n <= model.order + 2) or (model.order,)
+    options = IdentificationOptions(**{**options.__dict__, "transient_s": transient_s, "orders": orders})
+    return identify(recordings[0], recordings[1:], model.path, options).model
+
+
+def _with(model: Model, core, **changes) -> Model:
+    """A copy of model with the core (A, B, C, D) and fields replaced."""
+    A, B, C, D = core
+    fields = dict(path=model.path, fs=model.fs, A=A, B=B, C=C, D=D, delay=model.delay,
+                  input_nonlinearity=model.input_nonlinearity, disturbance_frequencies=model.disturbance_frequencies,
+                  history=list(model.history), identification=dict(model.identification))
+    fields.update(changes)
+    return Model(**fields)
+
+
+def _core(m: Model):
+    return m.A, m.B, m.C, m.D
+
+
+def _delay(model, noise, sweeps, params, options, transient_s):
+    # The scan sees the onset of the response; a core without feedthrough starts one sample
+    # later, so the delay one sample shorter is tried too and the better validation kept.
+    best = None
+    for total in sorted({model.delay + params["samples"], max(model.delay + params["samples"] - 1, model.delay)}):
+        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), total),
+                           model.disturbance_frequencies, options, transient_s)
+        trial = _with(model, _core(core), delay=total, identification=dict(core.identification))
+        if not trial.stable:
+            continue
+        rms = compare(trial, sweeps).rms
+        if best is None or rms < best[0]:
+            best = (rms, trial, total)
+    if best is None:
+        raise IdentificationError(f"refining with delay {model.delay + params['samples']} gave no stable model")
+    return best[1], {"total_samples": best[2]}
+
+
+def _nonlinearity(model, noise, sweeps, params, options, transient_s):
+    # a2, a3 from the sweep residual through the current linear part (the diagnosis's
+    # estimator), relative to the model's own polynomial; then the core on v = poly(u).
+    ctx = DiagnosisContext(model, noise, sweeps, compare(model, sweeps), transient_s)
+    found = nonlinearity_finding(ctx)["params"]
+    previous = model.input_nonlinearity or [1.0]
+    added = [0.0, found["a2"], found["a3"] if params["degree"] >= 3 else 0.0]
+    coefficients = [float(a + b) for a, b in zip(previous + [0.0] * (3 - len(previous)), added)] + previous[3:]
+    trial = _with(model, _core(model), input_nonlinearity=coefficients)
+    core = _reidentify(model, noise, sweeps, lambda u: _shift(trial.apply_input_nonlinearity(u), model.delay),
+                       model.disturbance_frequencies, options, transient_s)
+    return (_with(model, _core(core), input_nonlinearity=coefficients, identification=dict(core.identification)),
+            {"coefficients": coefficients})
+
+
+def _periodic(model, noise, sweeps, params, options, transient_s):
+    frequencies = sorted(set((model.disturbance_frequencies or []) + list(params["frequencies_hz"])))
+    core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
+                       frequencies, options, transient_s)
+    return (_with(model, _core(core), disturbance_frequencies=frequencies, identification=dict(core.identification)),
+            {"frequencies_hz": frequencies})
+
+
+def _factor(kind):
+    def build(model, noise, sweeps, params, options, transient_s):
+        make = highpass_factor if kind == "highpass" else lowpass_factor
+        b, a = make(params["corner_hz"], model.fs, params["order"])
+        core = _reidentify(model, noise, sweeps,
+                           lambda u: scipy.signal.lfilter(b, a, _shift(model.apply_input_nonlinearity(u), model.delay)),
+                           model.disturbance_frequencies, options, transient_s)
+        return (_with(model, series(tf_to_statespace(b, a), _core(core)), identification=dict(core.identification)),
+                {"factor_order": params["order"]})
+    return build
+
+
+def _output_error_data(model, noise, transient_s, seconds):
+    body = noise.trimmed(transient_s)
+    y = body.y - _disturbance(model, body, model.disturbance_frequencies)
+    return block_data(Recording(model.apply_input_nonlinearity(body.u), y, body.fs, body.path), (20.0, 5000.0), seconds)
+
+
+def _resonance(model, noise, sweeps, params, options, transient_s):
+    data = _output_error_data(model, noise, transient_s, (options or REFIT_OPTIONS).refine_seconds)
+    A = scipy.linalg.block_diag(model.A, mode_block(params["f0_hz"], params["q"], model.fs))
+    B = np.vstack([model.B, np.zeros((2, 1))])
+    C = np.hstack([model.C, np.zeros((1, 2))])
+    oe = refine_output_error(A, B, C, model.D, data, delay=model.delay, feedthrough=bool(model.D[0, 0]))
+    return _with(model, (oe.A, oe.B, oe.C, oe.D)), {"order": int(oe.A.shape[0])}
+
+
+def _input_noise(model, noise, sweeps, params, options, transient_s):
+    density = params["input_noise_density"]
+    data = _output_error_data(model, noise, transient_s, (options or REFIT_OPTIONS).refine_seconds)
+    # White input noise of one-sided density P has E|N_k|^2 = L P fs / 2 in an L-point DFT.
+    variance = data.length * density * model.fs / 2.0
+    oe = refine_output_error(model.A, model.B, model.C, model.D, data, delay=model.delay,
+                             feedthrough=bool(model.D[0, 0]), input_noise_variance=variance)
+    refined = _with(model, (oe.A, oe.B, oe.C, oe.D))
+    refined.identification["estimator"] = "bias-compensated output error (errors in variables)"
+    return refined, {"input_noise_density": density}
+
+
+_BUILDERS = {"delay": _delay, "input-nonlinearity": _nonlinearity, "periodic-disturbance": _periodic,
+             "highpass": _factor("highpass"), "lowpass": _factor("lowpass"), "resonance": _resonance,
+             "input-noise": _input_noise}
+
+
+def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> dict:
+    """Fill parameters left at None from the data (the same estimators as ``diagnose``)."""
+    params = dict(spec.params)
+    ctx = DiagnosisContext(model, noise, sweeps, before, transient_s)
+    if spec.kind == "delay" and params["samples"] is None:
+        best, _ = scan_delay(ctx)
+        if best <= model.delay:
+            raise IdentificationError("--add delay: the data show no delay beyond the model's; give delay:SAMPLES")
+        params["samples"] = best - model.delay
+    if spec.kind == "periodic-disturbance" and params["frequencies_hz"] is None:
+        found = disturbance_finding(ctx)["params"]["frequencies_hz"]
+        if not found:
+            raise IdentificationError("--add periodic-disturbance: no line found in the residual; "
+                                      "give periodic-disturbance:frequencies_hz=F1/F2")
+        params["frequencies_hz"] = tuple(found)
+    if spec.kind == "input-noise" and params["input_noise_density"] is None:
+        params["input_noise_density"] = input_noise_density(sweeps)
+    missing = [name for name, value in params.items() if value is None]
+    if missing:
+        raise IdentificationError(f"--add {spec.kind}: give {', '.join(missing)} (e.g. {spec.kind}:{missing[0]}=...)")
+    for name in ("f0_hz", "corner_hz"):
+        if name in params and params[name] >= model.fs / 2:
+            raise IdentificationError(f"--add {spec.kind}: {name} must be below fs/2 = {model.fs / 2:g} Hz")
+    return params
+
+
+def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
+           transient_s: float = 3.0, before: Comparison | None = None) -> Refinement:
+    """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify."""
+    spec = effect if isinstance(effect, EffectSpec) else parse_refinement(effect)
+    if spec.kind not in _BUILDERS:
+        raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
+    before = before or compare(model, sweeps)
+    params = _complete(spec, model, noise, sweeps, before, transient_s)
+    refined, extra = _BUILDERS[spec.kind](model, noise, sweeps, params, options, transient_s)
+    if not refined.stable:
+        raise IdentificationError(f"refining with {spec.kind} gave an unstable model (pole radius "
+                                  f"{refined.spectral_radius:.6f}); the model is left unchanged")
+    after = compare(refined, sweeps)
+    worse = after.rms > WORSE * before.rms
+    step = {"effect": spec.kind, "params": {**{k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}, **extra},
+            "rms_before": before.rms, "rms_after": after.rms, "noise_floor_before": before.noise_floor,
+            "noise_floor_after": after.noise_floor, "order_before": model.order, "order_after": refined.order,
+            "worse": bool(worse)}
+    refined.history = list(model.history) + [step]
+    refined.identification.update({"rms": after.rms, "noise_floor": after.noise_floor, "order": refined.order})
+    return Refinement(refined, step, before, after)
+
+
+def _auto_spec(found: dict) -> EffectSpec:
+    p = found["params"]
+    params = {"delay": lambda: {"samples": p["samples"]},
+              "input-nonlinearity": lambda: {"degree": 3},
+              "periodic-disturbance": lambda: {"frequencies_hz": tuple(p["frequencies_hz"])},
+              "input-noise": lambda: {"input_noise_density": p["input_noise_density"]}}[found["effect"]]()
+    return EffectSpec(found["effect"], params)
+
+
+AUTO_EFFECTS = ("delay", "input-nonlinearity", "periodic-disturbance", "input-noise")
+
+
+def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
+                max_steps: int = 5, transient_s: float = 3.0) -> tuple[Model, list[dict]]:
+    """Diagnose -> add the top significant model structure -> refit, until nothing is left.
+
+    Stops when no significant finding names a structure (data-quality findings,
+    time variation and clock drift are reported by ``diagnose`` but are not fixed
+    here), or after ``max_steps``. A step that makes the validation error worse is
+    recorded with ``accepted: False`` and its effect is not tried again until another
+    step has been accepted.
+    """
+    steps: list[dict] = []
+    rejected: set[str] = set()
+    for _ in range(max_steps):
+        diagnosis = diagnose(model, noise, sweeps, transient_s)
+        candidates = [f for f in diagnosis.significant if f["effect"] in AUTO_EFFECTS and f["effect"] not in rejected]
+        # The estimator choice is made once; the data keep showing input noise afterwards.
+        if any(step["effect"] == "input-noise" for step in model.history):
+            candidates = [f for f in candidates if f["effect"] != "input-noise"]
+        if not candidates:
+            break
+        spec = _auto_spec(candidates[0])
+        try:
+            result = refine(model, noise, sweeps, spec, options, transient_s, diagnosis.comparison)
+        except IdentificationError as exc:
+            # An unstable or failed refit is reported as a rejected step, never returned.
+            c = diagnosis.comparison
+            steps.append({"effect": spec.kind, "params": dict(spec.params), "rms_before": c.rms, "rms_after": c.rms,
+                          "noise_floor_before": c.noise_floor, "noise_floor_after": c.noise_floor,
+                          "order_before": model.order, "order_after": model.order, "worse": False,
+                          "accepted": False, "note": str(exc), "score": candidates[0]["score"]})
+            rejected.add(spec.kind)
+            continue
+        step = dict(result.step, accepted=not result.step["worse"], score=candidates[0]["score"])
+        steps.append(step)
+        if step["accepted"]:
+            model = result.model
+            model.history[-1] = step
+            # A structure that did not pay before this step may pay now (hum after the delay).
+            rejected.clear()
+        else:
+            rejected.add(step["effect"])
+    return model, steps
+
+
+def format_refinement(steps: list[dict]) -> str:
+    """One line per step: effect, parameters, rms before -> after, in multiples of the noise floor."""
+    if not steps:
+        return "no refinement: nothing significant to add"
+    lines = []
+    for k, step in enumerate(steps, start=1):
+        params = ", ".join(f"{name} {_brief(value)}" for name, value in step["params"].items())
+        verdict = "" if step.get("accepted", not step.get("worse")) else f"  (rejected: {step.get('note', 'validation error rose')})"
+        if step.get("worse") and "accepted" not in step:
+            verdict = "  (WARNING: validation error rose)"
+        lines.append(f"{k}. + {step['effect']} ({params}): rms {step['rms_before']:.3e} -> {step['rms_after']:.3e} FS "
+                     f"({step['rms_before'] / step['noise_floor_before']:.2f}x -> "
+                     f"{step['rms_after'] / step['noise_floor_after']:.2f}x noise floor), "
+                     f"order {step['order_before']} -> {step['order_after']}{verdict}")
+    return "\n".join(lines)
+
+
+def _brief(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, (list, tuple)):
+        return "/".join(_brief(v) for v in value[:8]) + ("/..." if len(value) > 8 else "")
+    return str(value)

@@ -1,0 +1,149 @@
+"""refine: the added structure brings the validation error to the noise floor and survives JSON."""
+
+import numpy as np
+import pytest
+
+from sysid.cli import main
+from sysid.compare import compare
+from sysid.errors import HelmetAncError
+from sysid.model import Model
+from sysid.refine import format_refinement, refine, refine_auto
+from sysid.simulate import write_session
+
+from effect_sessions import TEST_REFIT, effect_case
+
+BAND = np.linspace(20.0, 1500.0, 300)
+
+
+def refined(path, seed, effect, add):
+    session, model = effect_case(path, seed, (effect,))
+    result = refine(model, session.noise, session.sweeps, add, TEST_REFIT)
+    return session, model, result
+
+
+def test_delay_refinement_reaches_the_noise_floor_and_survives_json(tmp_path):
+    session, model, result = refined("ff", 5, "delay:23", "delay")
+    assert result.before.ratio > 10
+    assert result.model.delay in (23, 24)
+    assert result.after.ratio <= 1.2
+    assert result.model.history[-1]["effect"] == "delay"
+    assert result.model.history[-1]["rms_after"] == pytest.approx(result.after.rms)
+    result.model.save(tmp_path / "m.json")
+    again = Model.load(tmp_path / "m.json")
+    assert compare(again, session.sweeps).rms == pytest.approx(result.after.rms, rel=1e-9)
+
+
+def test_periodic_disturbance_refinement():
+    session, _, result = refined("ff", 5, "periodic-disturbance:50,3,1e-3", "periodic-disturbance")
+    assert result.model.disturbance_frequencies == pytest.approx([50.0, 100.0, 150.0], abs=0.05)
+    assert result.after.ratio <= 1.2
+
+
+def test_input_nonlinearity_refinement():
+    session, _, result = refined("ff", 5, "input-nonlinearity:-40,-35", "input-nonlinearity")
+    assert result.model.input_nonlinearity is not None
+    assert result.after.ratio <= 1.2
+
+
+@pytest.mark.parametrize("effect, add", [
+    ("highpass:60", "highpass:corner_hz=60"),
+    ("lowpass:1500,1", "lowpass:corner_hz=1500,order=1"),
+    ("resonance:3400,8,10", "resonance:f0_hz=3400,q=8"),
+])
+def test_given_structures_reach_the_noise_floor(effect, add, tmp_path):
+    session, _, result = refined("ff", 5, effect, add)
+    assert result.before.ratio > 5
+    assert result.after.ratio <= 1.2
+    result.model.save(tmp_path / "m.json")
+    assert compare(Model.load(tmp_path / "m.json"), session.sweeps).rms == pytest.approx(result.after.rms, rel=1e-9)
+
+
+def test_input_noise_refinement_removes_the_gain_bias():
+    session, model, result = refined("ff", 5, "input-noise:8", "input-noise")
+
+    def bias_db(m):
+        return np.max(np.abs(20 * np.log10(np.abs(m.frequency_response(BAND) / session.plant.frequency_response(BAND)))))
+
+    assert bias_db(model) > 0.4
+    assert bias_db(result.model) < 0.3
+    assert result.model.identification["estimator"].startswith("bias-compensated")
+
+
+def test_auto_finds_and_fixes_delay_and_hum_together():
+    session, model = effect_case("ff", 6, ("delay:23", "periodic-disturbance:50,2,1e-3"))
+    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    assert {s["effect"] for s in steps if s["accepted"]} == {"delay", "periodic-disturbance"}
+    assert compare(final, session.sweeps).ratio <= 1.2
+    assert [h["effect"] for h in final.history] == [s["effect"] for s in steps if s["accepted"]]
+    assert "noise floor" in format_refinement(steps)
+
+
+def test_auto_on_a_clean_session_changes_nothing():
+    session, model = effect_case("ff", 3, ())
+    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    assert steps == [] and final is model
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("wobble", "unknown effect 'wobble'"),
+    ("delay:x", "'x' is not a number"),
+    ("clipping", "clipping is not a model structure"),
+    ("resonance", "give f0_hz"),
+])
+def test_bad_refinements_are_refused(spec, message):
+    session, model = effect_case("ff", 3, ())
+    with pytest.raises(HelmetAncError, match=message):
+        refine(model, session.noise, session.sweeps, spec, TEST_REFIT)
+
+
+class TestCommandLine:
+    @pytest.fixture(scope="class")
+    def files(self, tmp_path_factory):
+        session, model = effect_case("ff", 5, ("delay:23",))
+        folder = tmp_path_factory.mktemp("refine_cli")
+        files = write_session(session, folder)
+        model.save(folder / "model.json")
+        files["model"] = folder / "model.json"
+        return files
+
+    def args(self, files, *extra):
+        return ["--noise", str(files["noise"]), "--sweep", str(files["sweep1"]), "--sweep", str(files["sweep2"]), *extra]
+
+    @pytest.mark.parametrize("extra, message", [
+        (["--add", "delay:0"], "samples must be between 1"),
+        (["--add", "wobble"], "unknown effect"),
+        ([], "give --add"),
+        (["--add", "delay:5", "--auto"], "not both"),
+    ])
+    def test_bad_input_is_one_line_exit_2_no_file(self, files, tmp_path, capsys, extra, message):
+        out = tmp_path / "new.json"
+        code = main(["refine", str(files["model"]), *self.args(files, *extra), "-o", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+        assert not out.exists()
+
+    def test_missing_model_file(self, files, tmp_path, capsys):
+        out = tmp_path / "new.json"
+        code = main(["diagnose", str(tmp_path / "absent.json"), *self.args(files)])
+        assert code == 2 and "cannot read model" in capsys.readouterr().err
+
+    def test_compare_and_diagnose_write_json(self, files, tmp_path, capsys):
+        assert main(["compare", str(files["model"]), "--sweep", str(files["sweep1"]), "--sweep", str(files["sweep2"]),
+                     "--json", str(tmp_path / "c.json")]) == 0
+        assert main(["diagnose", str(files["model"]), *self.args(files), "--json", str(tmp_path / "d.json")]) == 0
+        assert "delay" in capsys.readouterr().out
+        assert (tmp_path / "c.json").exists() and (tmp_path / "d.json").exists()
+
+    def test_refine_add_writes_the_refined_model(self, files, tmp_path, capsys):
+        out = tmp_path / "new.json"
+        assert main(["refine", str(files["model"]), *self.args(files, "--add", "delay:23"), "-o", str(out)]) == 0
+        model = Model.load(out)
+        assert model.delay in (22, 23) and model.history[-1]["effect"] == "delay"
+        assert "noise floor" in capsys.readouterr().out
+
+    def test_simulate_records_effects(self, tmp_path, capsys):
+        assert main(["simulate", str(tmp_path / "s"), "--noise-seconds", "4", "--sweep-seconds", "0.5",
+                     "--effect", "delay:5", "--effect", "periodic-disturbance:60"]) == 0
+        assert "periodic-disturbance" in (tmp_path / "s" / "truth.json").read_text()
+        assert main(["simulate", str(tmp_path / "t"), "--effect", "wobble"]) == 2
+        assert not (tmp_path / "t").exists()
