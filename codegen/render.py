@@ -164,10 +164,19 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
     return context
 
 
+def template_folder():
+    """Where the .j2 templates are: the installed ``codegen.templates`` package, or, when
+    ``codegen`` is imported from a source checkout (the distribution maps the top-level
+    ``templates/`` folder onto that package), the checkout's ``templates/`` folder."""
+    try:
+        return resources.files("codegen.templates")
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parent.parent / "templates"
+
+
 def _environment() -> jinja2.Environment:
-    loader = jinja2.FunctionLoader(
-        lambda template: resources.files("codegen.templates").joinpath(template).read_text(encoding="utf-8")
-    )
+    folder = template_folder()
+    loader = jinja2.FunctionLoader(lambda template: folder.joinpath(template).read_text(encoding="utf-8"))
     return jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
                               autoescape=False)
 

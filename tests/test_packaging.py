@@ -31,3 +31,10 @@ def test_templates_are_shipped_as_package_data():
 def test_console_scripts():
     scripts = _config()["project"]["scripts"]
     assert scripts == {"helmet-anc": "sysid.cli:main", "generate-firmware": "codegen.cli:main"}
+
+
+def test_templates_are_found_from_the_installed_package_or_the_checkout():
+    from codegen.render import template_folder
+
+    names = {p.name for p in template_folder().iterdir()}
+    assert {"filter.c.j2", "filter.h.j2", "cmsis_filter.c.j2", "cmsis_filter.h.j2"} <= names
