@@ -20,6 +20,8 @@ import scipy.signal
 __all__ = [
     "ModalForm",
     "modal_form",
+    "modal_inverse",
+    "block_output_row",
     "frequency_response",
     "simulate",
     "invariant_zeros",
@@ -57,18 +59,29 @@ def _as_siso(A, B, C, D):
     return A, B, C, D
 
 
+def modal_inverse(V: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """V^-1 and the 1-norm condition number of V; None instead of V^-1 when the
+    condition exceeds the modal form's limit (then the direct forms are used)."""
+    try:
+        V_inv = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None, np.inf
+    condition = float(np.linalg.norm(V, 1) * np.linalg.norm(V_inv, 1))
+    if not (np.isfinite(condition) and condition < _MAX_MODAL_CONDITION):
+        return None, condition
+    return V_inv, condition
+
+
 def modal_form(A, B, C, D) -> ModalForm:
-    """Partial-fraction (modal) form of a SISO state-space system."""
+    """Partial-fraction (modal) form of a SISO state-space system (NaN residues if unreliable)."""
     A, B, C, D = _as_siso(A, B, C, D)
     if A.shape[0] == 0:
         return ModalForm(np.zeros(0, complex), np.zeros(0, complex), D, 1.0)
     poles, V = np.linalg.eig(A)
-    condition = np.linalg.cond(V)
-    if not np.isfinite(condition) or condition > 1e15:
-        return ModalForm(poles, np.full_like(poles, np.nan), D, np.inf)
-    b_modal = np.linalg.solve(V, B[:, 0].astype(complex))
-    c_modal = C[0].astype(complex) @ V
-    return ModalForm(poles, c_modal * b_modal, D, float(condition))
+    V_inv, condition = modal_inverse(V)
+    if V_inv is None:
+        return ModalForm(poles, np.full_like(poles, np.nan), D, condition)
+    return ModalForm(poles, (C[0] @ V) * (V_inv @ B[:, 0]), D, condition)
 
 
 def frequency_response(A, B, C, D, z: np.ndarray) -> np.ndarray:
@@ -98,11 +111,11 @@ def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndar
         return D * u
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
     poles, V = np.linalg.eig(A)
-    condition = np.linalg.cond(V)
-    if np.isfinite(condition) and condition < _MAX_MODAL_CONDITION:
-        b_modal = np.linalg.solve(V, B[:, 0].astype(complex))
-        x0_modal = np.linalg.solve(V, x0.astype(complex))
-        c_modal = C[0].astype(complex) @ V
+    V_inv, _ = modal_inverse(V)
+    if V_inv is not None:
+        b_modal = V_inv @ B[:, 0]
+        x0_modal = V_inv @ x0
+        c_modal = C[0] @ V
         t = np.arange(u.size)
         y = np.zeros(u.size, dtype=complex)
         for p, b, c, x0_i in zip(poles, b_modal, c_modal, x0_modal):
@@ -160,6 +173,17 @@ def real_block_diagonal(poles: np.ndarray) -> np.ndarray:
         used[j] = True
         blocks.append(np.array([[p.real, p.imag], [-p.imag, p.real]]))
     return scipy.linalg.block_diag(*blocks) if blocks else np.zeros((0, 0))
+
+
+def block_output_row(A_block: np.ndarray) -> np.ndarray:
+    """C = [1 0 | 1 0 | 1 | ...]: observable for a real block-diagonal A with distinct poles."""
+    n = A_block.shape[0]
+    C = np.zeros((1, n))
+    i = 0
+    while i < n:
+        C[0, i] = 1.0
+        i += 2 if i + 1 < n and A_block[i, i + 1] != 0 else 1
+    return C
 
 
 def gramians(A, B, C) -> tuple[np.ndarray, np.ndarray]:

@@ -120,7 +120,7 @@ class _Problem:
 
     def linear(self, poles):
         A = lti.real_block_diagonal(poles)
-        C = _output_row(A)
+        C = lti.block_output_row(A)
         basis = modal_basis(A, C, self.data.z)
         columns = [basis * self.u_delayed[:, None], basis * self.data.z[:, None]]
         if self.feedthrough:
@@ -146,7 +146,7 @@ class _Problem:
         the bias; the poles are kept from the ordinary fit.
         """
         A = lti.real_block_diagonal(poles)
-        C = _output_row(A)
+        C = lti.block_output_row(A)
         basis = modal_basis(A, C, self.data.z)
         inputs = [basis]
         if self.feedthrough:
@@ -164,12 +164,6 @@ class _Problem:
         # Keep the column order of ``linear``: input columns of the modes, transient, then D.
         order = list(range(basis.shape[1])) + list(range(m, m + basis.shape[1])) + list(range(basis.shape[1], m))
         return A, C, theta[order], rhs - real @ theta
-
-
-def _output_row(A_block):
-    from .subspace import _block_output_row
-
-    return _block_output_row(A_block)
 
 
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,

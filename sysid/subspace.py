@@ -75,21 +75,11 @@ def _observation_rows(A: np.ndarray, C: np.ndarray, z: np.ndarray, eig=None) -> 
     """Rows C (z_k I - A)^-1 (M x n): by the eigenvectors of A, by solves if A is near-defective."""
     n = A.shape[0]
     poles, V = eig if eig is not None else np.linalg.eig(A)
-    V_inv = _safe_inverse(V)
+    V_inv, _ = lti.modal_inverse(V)
     if V_inv is not None:
         return ((C[0] @ V)[None, :] / (z[:, None] - poles[None, :])) @ V_inv
     eye = np.eye(n)
     return np.linalg.solve((z[:, None, None] * eye - A).transpose(0, 2, 1), np.broadcast_to(C[0], (z.size, n))[..., None])[..., 0]
-
-
-def _safe_inverse(V: np.ndarray, max_condition: float = 1e8) -> np.ndarray | None:
-    """V^-1, or None when V is too ill-conditioned (1-norm condition number) to trust the modal form."""
-    try:
-        V_inv = np.linalg.inv(V)
-    except np.linalg.LinAlgError:
-        return None
-    condition = np.linalg.norm(V, 1) * np.linalg.norm(V_inv, 1)
-    return V_inv if np.isfinite(condition) and condition < max_condition else None
 
 
 def stabilise(A, C, omega, g, feedthrough, method: str = "reflect", weights=None) -> SubspaceFit:
@@ -116,20 +106,9 @@ def stabilise(A, C, omega, g, feedthrough, method: str = "reflect", weights=None
     # A pole exactly on the unit circle stays there after reflection; pull it inside.
     reflected = np.where(np.abs(reflected) >= 1.0, reflected * (1 - 1e-6) / np.abs(reflected), reflected)
     A_new = lti.real_block_diagonal(reflected)
-    C_new = _block_output_row(A_new)
+    C_new = lti.block_output_row(A_new)
     B, D = fit_b_d(A_new, C_new, omega, g, feedthrough, weights)
     return SubspaceFit(A_new, B, C_new, D, True, f"reflected {int(unstable.sum())} pole(s) into the unit circle")
-
-
-def _block_output_row(A_block: np.ndarray) -> np.ndarray:
-    """C = [1 0 | 1 0 | 1 | ...]: observable for a real block-diagonal A with distinct poles."""
-    n = A_block.shape[0]
-    C = np.zeros((1, n))
-    i = 0
-    while i < n:
-        C[0, i] = 1.0
-        i += 2 if i + 1 < n and A_block[i, i + 1] != 0 else 1
-    return C
 
 
 class SubspaceDecomposition:
@@ -194,7 +173,7 @@ class SubspaceDecomposition:
         if np.max(np.abs(poles)) >= 1.0:
             return None
         B, D = fit_b_d(A, C, self.omega, self.g, self.feedthrough, self.weights, eig=(poles, V))
-        V_inv = _safe_inverse(V)
+        V_inv, _ = lti.modal_inverse(V)
         residues = None if V_inv is None else (C[0] @ V) * (V_inv @ B[:, 0])
         return SubspaceFit(A, B, C, D, True, "none", poles, residues)
 
