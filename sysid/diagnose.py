@@ -5,16 +5,17 @@
 
 - data quality, straight from the recordings: ``dc-offset``, ``clipping``;
 - the plant: ``delay`` (fixed-pole delay scan), ``input-nonlinearity`` (residual
-  against u^2, u^3 through the path);
+  against u^2, u^3 through the path), and ``resonance``, ``highpass``, ``lowpass``
+  (series factors fitted to the sweeps, ``sysid.findings.dynamics``);
 - the data, not the plant: ``periodic-disturbance`` (residual lines absent from the
   input), ``input-noise`` (input noise from the repeated sweeps, H1 bias),
-  ``clock-drift`` and ``time-variation`` (segments of the noise recording).
+  ``clock-drift`` and ``time-variation`` (segments of the noise recording);
+- last, ``under-modelled``: error above the floor that no named effect explains but
+  one more mode removes.
 
 Findings are sorted significant first, then by score; on data with no missing
-effect nothing is significant. A resonance, high-pass or low-pass factor is not
-named here: a low-order fit spreads its error over the whole band, and telling
-them apart needs refits per candidate; ``refine --add`` adds them with given
-parameters.
+effect nothing is significant. A delay and a series factor can both explain a
+phase lag; only the one that explains the sweeps better stays significant.
 """
 
 from __future__ import annotations
@@ -27,17 +28,23 @@ from .errors import IdentificationError
 from .findings import DiagnosisContext
 from .findings.data_quality import clipping_finding, dc_offset_finding
 from .findings.delay import delay_finding
+from .findings.dynamics import dynamics_findings
 from .findings.disturbance import disturbance_finding
 from .findings.input_noise import input_noise_finding
 from .findings.nonlinearity import nonlinearity_finding
+from .findings.under_modelled import under_modelled_finding
 from .findings.variation import clock_drift_finding, time_variation_finding
 from .model import Model
 from .recordings import Recording, check_same_rate
 
 __all__ = ["diagnose", "Diagnosis", "format_findings", "DETECTORS"]
 
-DETECTORS = (dc_offset_finding, clipping_finding, delay_finding, nonlinearity_finding, disturbance_finding,
-             input_noise_finding, clock_drift_finding, time_variation_finding)
+# Each detector returns one finding or a list of them; the delay runs before the series factors,
+# which settle a tie with it, and those before the rest, which then see what the factor leaves;
+# under-modelled is asked last, when nothing named explains the error.
+DETECTORS = (dc_offset_finding, clipping_finding, delay_finding, dynamics_findings, nonlinearity_finding,
+             disturbance_finding, input_noise_finding, clock_drift_finding, time_variation_finding,
+             under_modelled_finding)
 
 
 class Diagnosis(list):
@@ -64,7 +71,10 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         raise IdentificationError(f"{noise.path}: shorter than the {transient_s:g} s transient plus 0.5 s")
     comparison = comparison or compare(model, sweeps)
     ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
-    findings = [detector(ctx) for detector in DETECTORS]
+    findings = ctx.cache["findings"] = []
+    for detector in DETECTORS:
+        found = detector(ctx)
+        findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f["significant"], -f["score"]))
     return Diagnosis(findings, comparison, time.perf_counter() - t0)
 
@@ -82,7 +92,7 @@ def format_findings(findings, limit: int | None = None) -> str:
         lines.append(f"   remedy: {f['remedy']}")
     rest = [f"{f['effect']} {f['score']:.2f}" for f in findings if not f["significant"]]
     if rest:
-        lines.append("not significant (score < 1): " + ", ".join(rest))
+        lines.append("not significant (score): " + ", ".join(rest))
     return "\n".join(lines)
 
 

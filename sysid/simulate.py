@@ -23,7 +23,7 @@ from .errors import HelmetAncError
 from .model import Model, atomic_write_text
 from .plants import appendix_a_model
 from .recordings import Recording, write_wav16
-from .structures import highpass_factor, lowpass_factor, resonance_factor, series, tf_to_statespace
+from .structures import factor_coefficients, series, tf_to_statespace
 
 __all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
            "SIMULATED_EFFECTS"]
@@ -206,16 +206,9 @@ def _parse_effects(effects, fs: float) -> dict[str, dict]:
 def _effective_plant(base: Model, hidden: dict[str, dict]) -> Model:
     """The base plant with the hidden linear effects in series (delay, resonance, filters)."""
     system = (base.A, base.B, base.C, base.D)
-    factors = []
-    if "resonance" in hidden:
-        p = hidden["resonance"]
-        factors.append(resonance_factor(p["f0_hz"], p["q"], p["gain_db"], base.fs))
-    if "highpass" in hidden:
-        factors.append(highpass_factor(hidden["highpass"]["corner_hz"], base.fs, hidden["highpass"]["order"]))
-    if "lowpass" in hidden:
-        factors.append(lowpass_factor(hidden["lowpass"]["corner_hz"], base.fs, hidden["lowpass"]["order"]))
-    for b, a in factors:
-        system = series(system, tf_to_statespace(b, a))
+    for kind in ("resonance", "highpass", "lowpass"):
+        if kind in hidden:
+            system = series(system, tf_to_statespace(*factor_coefficients(kind, hidden[kind], base.fs)))
     delay = base.delay + (hidden["delay"]["samples"] if "delay" in hidden else 0)
     A, B, C, D = system
     return Model(path=base.path, fs=base.fs, A=A, B=B, C=C, D=D, delay=delay,

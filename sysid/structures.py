@@ -20,7 +20,7 @@ import numpy as np
 import scipy.signal
 
 __all__ = ["StateSpace", "series", "tf_to_statespace", "highpass_factor", "lowpass_factor", "resonance_factor",
-           "factor_response", "mode_block"]
+           "factor_coefficients", "factor_response", "mode_block"]
 
 StateSpace = tuple  # (A, B, C, D) of a SISO system, numpy arrays of shapes (n,n), (n,1), (1,n), (1,1)
 
@@ -65,6 +65,17 @@ def resonance_factor(f0_hz: float, q: float, gain_db: float, fs: float) -> tuple
     b = np.array([1 + alpha * big_a, -2 * np.cos(w0), 1 - alpha * big_a])
     a = np.array([1 + alpha / big_a, -2 * np.cos(w0), 1 - alpha / big_a])
     return b / a[0], a / a[0]
+
+
+def factor_coefficients(kind: str, params: dict, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(b, a) of a named factor: ``resonance`` (f0_hz, q, gain_db), ``highpass`` or ``lowpass`` (corner_hz, order)."""
+    if kind == "resonance":
+        return resonance_factor(params["f0_hz"], params["q"], params["gain_db"], fs)
+    if kind == "highpass":
+        return highpass_factor(params["corner_hz"], fs, params["order"])
+    if kind == "lowpass":
+        return lowpass_factor(params["corner_hz"], fs, params["order"])
+    raise ValueError(f"unknown factor {kind!r}")
 
 
 def factor_response(b, a, frequencies_hz, fs: float) -> np.ndarray:

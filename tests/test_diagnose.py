@@ -7,7 +7,7 @@ import pytest
 
 from sysid.diagnose import diagnose, format_findings
 
-from effect_sessions import effect_case
+from effect_sessions import effect_case, random_factor, reference_case
 
 CONTRACT = {"effect", "significant", "score", "params", "explanation", "remedy", "evidence"}
 
@@ -61,6 +61,56 @@ def test_input_noise_snr_is_estimated(path):
     assert finding["params"]["input_snr_db"] == pytest.approx(8.0, abs=1.0)
 
 
+# Stated tolerances of the series-factor estimates (the sweeps' SNR makes them much tighter in practice).
+FACTOR_TOLERANCE = {"f0_hz": 0.03, "q": 0.2, "corner_hz": 0.1}
+GAIN_TOLERANCE_DB = 1.0
+
+
+def check_factor(kind, path, seed):
+    spec, truth = random_factor(kind, np.random.default_rng(seed))
+    session, model = reference_case(path, seed, (spec,))
+    findings = diagnose(model, session.noise, session.sweeps)
+    assert findings.significant, format_findings(findings)
+    top = findings.significant[0]
+    assert top["effect"] == kind, (spec, format_findings(findings))
+    assert [f["effect"] for f in findings.significant] == [kind], format_findings(findings)
+    for name, value in truth.items():
+        if name in FACTOR_TOLERANCE:
+            assert top["params"][name] == pytest.approx(value, rel=FACTOR_TOLERANCE[name]), (spec, name)
+        elif name == "gain_db":
+            assert top["params"][name] == pytest.approx(value, abs=GAIN_TOLERANCE_DB), spec
+        else:
+            assert top["params"][name] == value, (spec, name)
+    assert top["remedy"].startswith(f"refine --add {kind}:")
+    return top
+
+
+@pytest.mark.parametrize("kind, path, seed", [("resonance", "ff", 41), ("resonance", "fb", 42), ("highpass", "fb", 43),
+                                              ("highpass", "ff", 44), ("lowpass", "ff", 45), ("lowpass", "fb", 46)])
+def test_series_factors_are_found_with_their_parameters(kind, path, seed):
+    top = check_factor(kind, path, seed)
+    words = {"resonance": "a mode the model lacks", "highpass": "phase lead", "lowpass": "phase lag"}
+    assert words[kind] in top["explanation"]
+
+
+def test_a_factor_taken_in_by_the_fit_leaves_the_model_under_modelled():
+    # Identified on the session itself, the nominal-order model takes the 800 Hz mode in and gives
+    # up the plant's weak 4.3 kHz mode: no factor fits what is left, more order does.
+    session, model = effect_case("ff", 3, ("resonance:800,5,8",))
+    findings = diagnose(model, session.noise, session.sweeps)
+    top = findings.significant[0]
+    assert [f["effect"] for f in findings.significant] == ["under-modelled"], format_findings(findings)
+    assert top["params"]["suggested_order"] == model.order + 2
+    assert top["remedy"] == "refine --add under-modelled"
+
+
+@pytest.mark.parametrize("path", ["ff", "fb"])
+def test_a_delay_is_not_mistaken_for_a_low_pass(path):
+    session, model = reference_case(path, 7, ("delay:4",))
+    findings = diagnose(model, session.noise, session.sweeps)
+    assert [f["effect"] for f in findings.significant] == ["delay"], format_findings(findings)
+
+
 def test_dc_offset_is_reported_from_the_recordings():
     finding, _, _ = top("fb", 5, "dc-offset:0.01")
     assert finding["effect"] == "dc-offset"
@@ -100,6 +150,14 @@ def test_delay_many_seeds(seed):
     samples = int(np.random.default_rng(seed).integers(5, 50))
     finding, _, _ = top("ff", seed, f"delay:{samples}")
     assert finding["effect"] == "delay" and abs(finding["params"]["samples"] - samples) <= 1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(50, 54))
+@pytest.mark.parametrize("path", ["fb", "ff"])
+@pytest.mark.parametrize("kind", ["resonance", "highpass", "lowpass"])
+def test_series_factors_many_seeds(kind, path, seed):
+    check_factor(kind, path, seed)
 
 
 SLOW_CASES = [("delay", lambda rng: f"delay:{int(rng.integers(8, 50))}"),

@@ -194,7 +194,10 @@ class TestDiagnosisFigures:
         _finding("clipping", fraction=0.01),
         _finding("time-variation", change_db=1.0),
         dict(_finding("clock-drift", ppm=50.0), evidence={"segment_delays": [0.0, -0.3, -0.6, -0.9]}),
-        _finding("resonance", f0_hz=3400.0),
+        _finding("resonance", f0_hz=3400.0, q=8.0, gain_db=10.0),
+        _finding("highpass", corner_hz=60.0, order=1),
+        _finding("lowpass", corner_hz=2500.0, order=2),
+        _finding("under-modelled", order=5, worst_band_hz=800.0),
     ], ids=lambda f: f["effect"])
     def test_each_effect_gets_a_plot(self, ff, finding):
         session, result, comparison = ff
@@ -211,14 +214,26 @@ class TestDiagnosisFigures:
         marks = [line.get_xdata()[0] for line in figure.axes[0].get_lines() if line.get_linestyle() == "--"]
         assert marks == [50.0, 150.0]
 
+    def test_series_factor_is_drawn_over_the_mismatch(self, ff):
+        session, result, comparison = ff
+        context = DiagnosisContext(result.model, session.noise, session.sweeps, comparison)
+        figure = figures.finding_figure(_finding("resonance", f0_hz=1000.0, q=5.0, gain_db=10.0), context, result.spectra)
+        fitted = next(line for line in figure.axes[0].get_lines() if "factor" in str(line.get_label()))
+        assert np.max(fitted.get_ydata()) == pytest.approx(10.0, abs=0.1)
+
     def test_dedicated_plots_cover_the_detectors(self):
         from sysid.diagnose import DETECTORS
 
         names = {"dc_offset_finding": "dc-offset", "clipping_finding": "clipping", "delay_finding": "delay",
                  "nonlinearity_finding": "input-nonlinearity", "disturbance_finding": "periodic-disturbance",
                  "input_noise_finding": "input-noise", "clock_drift_finding": "clock-drift",
-                 "time_variation_finding": "time-variation"}
-        assert {names[d.__name__] for d in DETECTORS} <= set(FINDING_PLOTS)
+                 "time_variation_finding": "time-variation", "dynamics_findings": ("resonance", "highpass", "lowpass"),
+                 "under_modelled_finding": "under-modelled"}
+        effects = set()
+        for detector in DETECTORS:
+            named = names[detector.__name__]
+            effects.update((named,) if isinstance(named, str) else named)
+        assert effects <= set(FINDING_PLOTS)
 
     def test_refinement_staircase(self):
         history = [{"effect": "delay", "params": {"samples": 23}, "rms_before": 8e-4, "rms_after": 2e-4},

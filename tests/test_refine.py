@@ -10,7 +10,7 @@ from sysid.model import Model
 from sysid.refine import format_refinement, refine, refine_auto
 from sysid.simulate import write_session
 
-from effect_sessions import TEST_REFIT, effect_case
+from effect_sessions import TEST_REFIT, effect_case, random_factor, reference_case
 
 BAND = np.linspace(20.0, 1500.0, 300)
 
@@ -78,6 +78,38 @@ def test_auto_finds_and_fixes_delay_and_hum_together():
     assert "noise floor" in format_refinement(steps)
 
 
+def auto_fixes_factor(kind, path, seed):
+    spec, _ = random_factor(kind, np.random.default_rng(seed))
+    session, model = reference_case(path, seed, (spec,))
+    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    assert [s["effect"] for s in steps if s["accepted"]] == [kind], (spec, format_refinement(steps))
+    assert compare(final, session.sweeps).ratio <= 1.2, (spec, format_refinement(steps))
+    assert final.stable and final.history[-1]["effect"] == kind
+    return final
+
+
+@pytest.mark.parametrize("kind, path, seed", [("resonance", "fb", 41), ("highpass", "fb", 43), ("lowpass", "ff", 45)])
+def test_auto_adds_the_missing_series_factor(kind, path, seed, tmp_path):
+    final = auto_fixes_factor(kind, path, seed)
+    final.save(tmp_path / "m.json")
+    assert Model.load(tmp_path / "m.json").history[-1]["params"] == final.history[-1]["params"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(50, 53))
+@pytest.mark.parametrize("path", ["fb", "ff"])
+@pytest.mark.parametrize("kind", ["resonance", "highpass", "lowpass"])
+def test_auto_adds_series_factors_many_seeds(kind, path, seed):
+    auto_fixes_factor(kind, path, seed)
+
+
+def test_more_order_fixes_an_under_modelled_model():
+    session, model = effect_case("ff", 3, ("resonance:800,5,8",))
+    result = refine(model, session.noise, session.sweeps, "under-modelled", TEST_REFIT)
+    assert result.before.ratio > 3
+    assert result.after.ratio <= 1.2 and result.model.order == model.order + 2
+
+
 def test_auto_on_a_clean_session_changes_nothing():
     session, model = effect_case("ff", 3, ())
     final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
@@ -88,7 +120,8 @@ def test_auto_on_a_clean_session_changes_nothing():
     ("wobble", "unknown effect 'wobble'"),
     ("delay:x", "'x' is not a number"),
     ("clipping", "clipping is not a model structure"),
-    ("resonance", "give f0_hz"),
+    ("resonance", "the sweeps show no resonance"),
+    ("highpass:order=2", "the sweeps show no highpass"),
 ])
 def test_bad_refinements_are_refused(spec, message):
     session, model = effect_case("ff", 3, ())

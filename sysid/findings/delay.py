@@ -21,7 +21,7 @@ from ..recordings import Recording
 from ..validation import rms_from_responses, sweep_spectrum
 from . import SPEED_OF_SOUND, DiagnosisContext, finding
 
-__all__ = ["delay_finding", "scan_delay", "MAX_EXTRA_DELAY"]
+__all__ = ["delay_finding", "scan_delay", "refit_rms", "MAX_EXTRA_DELAY"]
 
 MAX_EXTRA_DELAY = 120
 # The best delay must lower the fixed-pole cost by this factor, and the model must be
@@ -42,28 +42,34 @@ def _scan_data(ctx: DiagnosisContext) -> BlockData:
     return ctx.cache["delay_data"]
 
 
-def confirm_delay(ctx: DiagnosisContext, totals) -> dict[int, float]:
-    """Validation-rms gain of output-error refits with each total delay over one with the model's.
+def refit_rms(ctx: DiagnosisContext, A, B, C, D, delay: int, max_iterations: int = 20) -> float:
+    """Validation rms of a quick output-error refit from (A, B, C, D) with the given total delay.
 
-    All refits start from the model and run a few iterations on the scan data; the
-    rms is evaluated on the sweeps' DFT bins (``sysid.validation.rms_from_responses``).
+    The refit runs a few iterations on the scan data (every 4th bin of 1 s of the
+    noise recording); the rms is evaluated on the sweeps' DFT bins
+    (``sysid.validation.rms_from_responses``).
     """
     model = ctx.model
-    data = _scan_data(ctx)
-    spectra = [sweep_spectrum(Recording(model.apply_input_nonlinearity(s.u), s.y, s.fs, s.path)) for s in ctx.sweeps]
-
-    def refit_rms(d):
-        fit = refine_output_error(model.A, model.B, model.C, model.D, data, delay=d, max_iterations=20,
-                                  feedthrough=bool(model.D[0, 0]))
-        responses = []
-        for s in spectra:
-            z = np.exp(2j * np.pi * s.frequencies / s.fs)
-            responses.append(lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z) * z ** (-d))
-        return rms_from_responses(spectra, responses)
-
+    if "sweep_spectra" not in ctx.cache:
+        ctx.cache["sweep_spectra"] = [sweep_spectrum(Recording(model.apply_input_nonlinearity(s.u), s.y, s.fs, s.path))
+                                      for s in ctx.sweeps]
+    spectra = ctx.cache["sweep_spectra"]
     with threadpool_limits(limits=1, user_api="blas"):
-        reference = refit_rms(model.delay)
-        return {int(d): (reference / rms if rms > 0 else 0.0) for d in totals for rms in [refit_rms(int(d))]}
+        fit = refine_output_error(A, B, C, D, _scan_data(ctx), delay=delay, max_iterations=max_iterations,
+                                  feedthrough=bool(D[0, 0]))
+    responses = []
+    for s in spectra:
+        z = np.exp(2j * np.pi * s.frequencies / s.fs)
+        responses.append(lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z) * z ** (-delay))
+    return rms_from_responses(spectra, responses)
+
+
+def confirm_delay(ctx: DiagnosisContext, totals) -> dict[int, float]:
+    """Validation-rms gain of quick refits (``refit_rms``) with each total delay over one with the model's."""
+    m = ctx.model
+    reference = refit_rms(ctx, m.A, m.B, m.C, m.D, m.delay)
+    return {int(d): (reference / rms if rms > 0 else 0.0) for d in totals
+            for rms in [refit_rms(ctx, m.A, m.B, m.C, m.D, int(d))]}
 
 
 def generic_scan(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY) -> int:
@@ -127,7 +133,8 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
                        f"non-minimum-phase zeros (fixed-pole cost falls {ratio:.2f}x at delay {best})")
     else:
         explanation = "no delay beyond the model's own lowers the fit cost"
-    return finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
+    ctx.cache["delay_finding"] = finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
                    {"samples": extra, "total_samples": best, "microseconds": microseconds, "sound_path_cm": centimetres},
                    explanation, f"refine --add delay:{extra}" if extra >= 1 else "none",
                    {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain})
+    return ctx.cache["delay_finding"]

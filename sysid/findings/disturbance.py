@@ -17,6 +17,7 @@ import scipy.ndimage
 from ..compare import fit_sinusoids
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding
+from .dynamics import factor_residual, within_resonance
 
 __all__ = ["disturbance_finding", "find_lines"]
 
@@ -72,12 +73,17 @@ def _in_sweep(residual: np.ndarray, frequency: float, fs: float) -> bool:
 def disturbance_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     body_start = int(round(ctx.transient_s * ctx.fs))
-    residual = (ctx.noise.y - model.simulate(ctx.noise.u))[body_start:]
+    # What a significant series factor leaves: a lightly damped mode the model lacks rings like a line.
+    prediction = model.simulate(ctx.noise.u)
+    residual = factor_residual(ctx, ctx.noise.y - prediction, prediction)[body_start:]
     u = ctx.noise.u[body_start:]
-    candidates = find_lines(residual, u, ctx.fs, known=model.disturbance_frequencies or ())
+    candidates = [line for line in find_lines(residual, u, ctx.fs, known=model.disturbance_frequencies or ())
+                  if not within_resonance(ctx, line[0])]
     first = int(round(SKIP_S * ctx.fs))
-    lines = [line for line in candidates
-             if all(_in_sweep(s["residual"][first:], line[0], ctx.fs) for s in ctx.comparison.per_sweep)]
+    sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
+    if candidates and "series_factor" in ctx.cache:
+        sweep_residuals = [factor_residual(ctx, r, model.simulate(s.u)) for r, s in zip(sweep_residuals, ctx.sweeps)]
+    lines = [line for line in candidates if all(_in_sweep(r[first:], line[0], ctx.fs) for r in sweep_residuals)]
     significant = bool(lines)
     frequencies = [round(line[0], 3) for line in lines]
     levels = [line[2] for line in lines]

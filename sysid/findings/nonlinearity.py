@@ -14,6 +14,7 @@ import numpy as np
 
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, linear_part
+from .dynamics import factor_residual, with_series_factor
 
 __all__ = ["nonlinearity_finding", "polynomial_columns"]
 
@@ -41,8 +42,14 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     first = int(round(SKIP_S * ctx.fs))
     rows, targets = [], []
     for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
-        rows.append(polynomial_columns(ctx.model, sweep.u)[first:])
-        targets.append(record["residual"][first:])
+        columns = polynomial_columns(ctx.model, sweep.u)
+        residual = record["residual"]
+        if "series_factor" in ctx.cache:
+            # What a significant series factor leaves: the factor applies to every column.
+            residual = factor_residual(ctx, residual, columns[:, 0])
+            columns = np.stack([with_series_factor(ctx, c) for c in columns.T], axis=1)
+        rows.append(columns[first:])
+        targets.append(residual[first:])
     X = np.vstack(rows)
     e = np.concatenate(targets)
     e = e - e.mean()

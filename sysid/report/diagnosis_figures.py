@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
+from .. import structures
 from ..findings import DiagnosisContext
 from ..findings.delay import scan_delay
 from ..findings.variation import segment_responses
@@ -204,8 +205,23 @@ def _mismatch(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float
     return figure
 
 
+def _series_factor(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
+    """Measured / model response with the fitted factor's response over it (resonance, high-/low-pass)."""
+    figure = _mismatch(ctx, spectra, finding, dpi)
+    f = np.geomspace(_BAND[0], _BAND[1], 400)
+    h = structures.factor_response(*structures.factor_coefficients(finding["effect"], finding["params"], ctx.fs), f, ctx.fs)
+    figure.axes[0].plot(f, db(h), color=COLORS["model"], lw=1.2, ls="--", label=f"fitted {finding['effect']} factor")
+    figure.axes[1].plot(f, np.angle(h, deg=True), color=COLORS["model"], lw=1.2, ls="--")
+    figure.axes[0].legend(fontsize=7)
+    return figure
+
+
 FINDING_PLOTS = {
     "delay": _delay,
+    "resonance": _series_factor,
+    "highpass": _series_factor,
+    "lowpass": _series_factor,
+    "under-modelled": _mismatch,
     "input-nonlinearity": _nonlinearity,
     "periodic-disturbance": _disturbance,
     "input-noise": _input_noise,

@@ -1,0 +1,61 @@
+"""Too low an order: error above the noise floor that more dynamics remove (effects.md, under-modelled).
+
+Asked last, when the model is above the noise floor and no named effect explains
+it: one more mode (2 states), started at the third-octave band worst against the
+noise floor, is fitted together with the model's own poles by a quick output-error
+refit (``sysid.findings.delay.refit_rms``). If that lowers the validation rms by
+``GAIN`` the model is under-modelled: a nominal-order fit of a path with an extra
+resonance or filter takes it in and gives up a weaker mode, and the error is then
+spread over a band rather than shaped like any one factor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from ..structures import mode_block
+from . import DiagnosisContext, finding
+from .delay import refit_rms
+
+__all__ = ["under_modelled_finding", "worst_band"]
+
+GAIN = 1.25
+EXCESS = 1.2
+START_Q = 3.0
+
+
+def worst_band(ctx: DiagnosisContext) -> dict:
+    """The third-octave band (row of the comparison's table) with the largest error over noise."""
+    rows = [r for r in ctx.comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= 4000.0]
+    return max(rows, key=lambda r: r["ratio"])
+
+
+def under_modelled_finding(ctx: DiagnosisContext) -> dict:
+    model = ctx.model
+    explained = any(f["significant"] for f in ctx.cache.get("findings", ()))
+    if ctx.excess < EXCESS or explained:
+        reason = "the model is at the noise floor" if ctx.excess < EXCESS else "a named effect explains the error"
+        return finding("under-modelled", False, 0.0, {"order": model.order}, f"not tested: {reason}", "none")
+    band = worst_band(ctx)
+    A = scipy.linalg.block_diag(model.A, mode_block(band["center_hz"], START_Q, model.fs))
+    B = np.vstack([model.B, np.zeros((2, 1))])
+    C = np.hstack([model.C, np.zeros((1, 2))])
+    reference = refit_rms(ctx, model.A, model.B, model.C, model.D, model.delay)
+    larger = refit_rms(ctx, A, B, C, model.D, model.delay, max_iterations=30)
+    gain = ctx.comparison.rms / larger if larger > 0 else 0.0
+    # The refit of the model as it is shows how much is mere parameter drift, not order.
+    order_gain = reference / larger if larger > 0 else 0.0
+    significant = gain >= GAIN and order_gain >= GAIN
+    above = [r for r in ctx.comparison.bands if r["ratio"] > 2.0]
+    span = f"{above[0]['low_hz']:.0f}-{above[-1]['high_hz']:.0f} Hz" if above else f"the {band['center_hz']:.0f} Hz band"
+    explanation = (f"the error is {ctx.excess:.1f}x the noise floor over {span} (worst {band['ratio']:.1f}x at "
+                   f"{band['center_hz']:.0f} Hz) and no single delay, factor or disturbance explains it; one more "
+                   f"mode lowers it {gain:.2f}x: order {model.order} is too low for the dynamics in band")
+    if not significant:
+        explanation = f"not significant (one more mode lowers the error only {gain:.2f}x); " + explanation
+    return finding("under-modelled", significant, min(gain, order_gain) / GAIN,
+                   {"order": model.order, "suggested_order": model.order + 2, "worst_band_hz": band["center_hz"],
+                    "worst_band_ratio": band["ratio"]},
+                   explanation, "refine --add under-modelled" if significant else "none",
+                   {"rms_over_floor": ctx.excess, "rms_gain": gain, "gain_over_refit": order_gain})
