@@ -71,7 +71,11 @@ def fit_sinusoids(x: np.ndarray, frequencies, fs: float) -> np.ndarray:
 
 @dataclass
 class Comparison:
-    """What ``compare`` measures; see the module docstring for definitions and units."""
+    """What ``compare`` measures; see the module docstring for definitions and units.
+
+    ``per_sweep`` holds one dict per sweep: path, u, measured, linear (the model's
+    prediction), predicted (linear plus the fitted disturbance lines), residual, fs.
+    """
 
     fit_percent: float
     rms: float
@@ -126,14 +130,14 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     per_sweep = []
     cleaned = []
     for sweep in sweeps:
-        predicted = model.simulate(sweep.u)
-        residual = sweep.y - predicted
+        linear = model.simulate(sweep.u)
+        residual = sweep.y - linear
         disturbance = fit_sinusoids(residual[first:], model.disturbance_frequencies, fs)
         disturbance = np.concatenate((np.zeros(first), disturbance))[: residual.size]
-        predicted = predicted + disturbance
+        predicted = linear + disturbance
         residual = residual - disturbance
         per_sweep.append({"path": sweep.path, "u": sweep.u, "measured": sweep.y, "predicted": predicted,
-                          "residual": residual, "fs": fs})
+                          "linear": linear, "residual": residual, "fs": fs})
         cleaned.append(Recording(sweep.u, sweep.y - disturbance, fs, sweep.path))
 
     tails = [s["residual"][first:] for s in per_sweep]

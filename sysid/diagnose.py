@@ -39,10 +39,10 @@ from .recordings import Recording, check_same_rate
 
 __all__ = ["diagnose", "Diagnosis", "format_findings", "DETECTORS"]
 
-# Each detector returns one finding or a list of them; the delay runs before the series factors,
-# which settle a tie with it, and those before the rest, which then see what the factor leaves;
+# Each detector returns one finding or a list of them. The series factors come first: the delay
+# settles a tie with them, and the later detectors see what a significant factor leaves;
 # under-modelled is asked last, when nothing named explains the error.
-DETECTORS = (dc_offset_finding, clipping_finding, delay_finding, dynamics_findings, nonlinearity_finding,
+DETECTORS = (dc_offset_finding, clipping_finding, dynamics_findings, delay_finding, nonlinearity_finding,
              disturbance_finding, input_noise_finding, clock_drift_finding, time_variation_finding,
              under_modelled_finding)
 

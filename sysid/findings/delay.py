@@ -20,6 +20,7 @@ from ..output_error import BlockData, block_data, linear_cost, refine_output_err
 from ..recordings import Recording
 from ..validation import rms_from_responses, sweep_spectrum
 from . import SPEED_OF_SOUND, DiagnosisContext, finding
+from .dynamics import arbitrate
 
 __all__ = ["delay_finding", "scan_delay", "refit_rms", "MAX_EXTRA_DELAY"]
 
@@ -112,7 +113,8 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
     # moves the fixed-pole cost little; a quick refit with and without it decides.
     significant = extra >= 1 and ratio >= COST_RATIO and (ctx.excess >= EXCESS or ratio >= CLEAR_RATIO)
     refit_gain = None
-    if not significant and ctx.excess >= EXCESS:
+    # The slower checks below are for an error nothing else explains; a series factor may.
+    if not significant and ctx.excess >= EXCESS and "series_factor" not in ctx.cache:
         if extra < 1 or ratio < COST_RATIO:
             # The model's poles may be bent to mimic the delay: scan with generic poles.
             generic = generic_scan(ctx)
@@ -137,4 +139,5 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
                    {"samples": extra, "total_samples": best, "microseconds": microseconds, "sound_path_cm": centimetres},
                    explanation, f"refine --add delay:{extra}" if extra >= 1 else "none",
                    {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain})
+    arbitrate(ctx.cache["delay_finding"], ctx)
     return ctx.cache["delay_finding"]

@@ -82,7 +82,7 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     first = int(round(SKIP_S * ctx.fs))
     sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
     if candidates and "series_factor" in ctx.cache:
-        sweep_residuals = [factor_residual(ctx, r, model.simulate(s.u)) for r, s in zip(sweep_residuals, ctx.sweeps)]
+        sweep_residuals = [factor_residual(ctx, s["residual"], s["linear"]) for s in ctx.comparison.per_sweep]
     lines = [line for line in candidates if all(_in_sweep(r[first:], line[0], ctx.fs) for r in sweep_residuals)]
     significant = bool(lines)
     frequencies = [round(line[0], 3) for line in lines]

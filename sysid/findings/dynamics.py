@@ -20,9 +20,9 @@ A family is the finding when it lowers the rms by ``GAIN``, removes at least
 ``SHARE`` of the error power above the noise floor, and the model is ``EXCESS``
 above the floor. Among families within ``SIMPLER`` of each other the one with fewer
 parameters wins (a peaking factor with a low f0 imitates a high-pass shelf). The
-other families are reported, not significant. ``arbitrate`` settles a tie with the
-delay detector (which runs first): both are series factors, and the one that
-explains the sweeps better is kept.
+other families are reported, not significant. ``arbitrate`` (called by the delay
+detector, which runs next) settles a tie with a delay: both are series factors, and
+the one that explains the sweeps better is kept.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def sweep_bins(ctx: DiagnosisContext, band=VALIDATION_BAND) -> SweepBins:
     first = int(round(SKIP_S * ctx.fs))
     spectra = []
     for entry, sweep in zip(ctx.comparison.per_sweep, ctx.sweeps):
-        linear = ctx.model.simulate(sweep.u)
+        linear = entry["linear"]
         # ``predicted`` holds the model's disturbance lines too; they belong to the measurement side.
         measured = sweep.y - (entry["predicted"] - linear)
         p, y = linear[first:], measured[first:]
@@ -107,7 +107,7 @@ class FactorFit:
 
 
 def _fit(bins: SweepBins, family: str, starts: list[dict]) -> FactorFit:
-    """Best fit of one family over several starting points (bounded quasi-Newton on the compressed rms)."""
+    """Best fit of one family from the best of several starting points (bounded quasi-Newton on the compressed rms)."""
     top = min(bins.spectra[0].frequencies.max(), 0.95 * bins.fs / 2)
     cells = bins.compressed.frequencies
     if family == "resonance":
@@ -133,33 +133,31 @@ def _fit(bins: SweepBins, family: str, starts: list[dict]) -> FactorFit:
         # A fit held at a bound is not described by the family (a shelf is no resonance).
         return all(lo + EDGE < v < hi - EDGE for v, (lo, hi) in zip(x, bounds[:2]))
 
-    def cost(x):
-        return float(bins.compressed.rms(factor_response(family, unpack(x), cells, bins.fs))[0])
+    # z^-1 at the cell edges once: each evaluation is then a ratio of two short polynomials.
+    z1 = np.exp(-2j * np.pi * cells / bins.fs)
 
-    best = None
-    for start in starts:
-        x0 = [min(max(v, lo), hi) for v, (lo, hi) in zip(pack(start), bounds)]
-        result = scipy.optimize.minimize(cost, x0, method="L-BFGS-B", bounds=bounds, options={"maxiter": 60})
-        if best is None or result.fun < best[0]:
-            best = (result.fun, unpack(result.x), interior(result.x))
+    def on_cells(x):
+        b, a = structures.factor_coefficients(family, unpack(x), bins.fs)
+        return np.polyval(np.asarray(b)[::-1], z1) / np.polyval(np.asarray(a)[::-1], z1)
+
+    def cost(x):
+        return float(bins.compressed.rms(on_cells(x))[0])
+
+    # The starting points are scored together; the quasi-Newton search runs from the best one.
+    x0s = [[min(max(v, lo), hi) for v, (lo, hi) in zip(pack(start), bounds)] for start in starts]
+    scores = bins.compressed.rms(np.array([on_cells(x) for x in x0s]))
+    result = scipy.optimize.minimize(cost, x0s[int(np.argmin(scores))], method="L-BFGS-B", bounds=bounds,
+                                     options={"maxiter": 60})
+    best = (result.fun, unpack(result.x), interior(result.x))
     params = best[1]
     rms = bins.rms(lambda f: factor_response(family, params, f, bins.fs))
     return FactorFit(family, params, rms, len(bounds), best[2])
 
 
 def _resonance_starts(ctx: DiagnosisContext, bins: SweepBins) -> list[dict]:
-    """f0 at the centres of the two third-octave bands worst against the noise floor, both signs of gain."""
-    top = F0_RANGE[1] * VALIDATION_BAND[1]
-    rows = [r for r in ctx.comparison.bands if F0_RANGE[0] <= r["center_hz"] <= top and np.isfinite(r["ratio"])]
-    worst = sorted(rows, key=lambda r: -r["ratio"])[:2]
-    starts = []
-    for row in worst:
-        s = bins.spectra[0]
-        inside = (s.frequencies >= row["low_hz"]) & (s.frequencies <= row["high_hz"])
-        power = np.sum(np.abs(s.Y[inside]) ** 2) / max(np.sum(np.abs(s.U[inside]) ** 2), 1e-300)
-        sign = 1.0 if power >= 1.0 else -1.0
-        starts.append({"f0_hz": row["center_hz"], "q": 4.0, "gain_db": sign * 6.0})
-    return starts
+    """A coarse grid over the band: f0 log-spaced, a few Q, a peak and a dip."""
+    f0 = np.geomspace(F0_RANGE[0], F0_RANGE[1] * VALIDATION_BAND[1], 24)
+    return [{"f0_hz": f, "q": q, "gain_db": g} for f in f0 for q in (2.0, 6.0, 18.0) for g in (-6.0, 6.0)]
 
 
 def fit_factor(ctx: DiagnosisContext, family: str) -> FactorFit:
@@ -167,7 +165,7 @@ def fit_factor(ctx: DiagnosisContext, family: str) -> FactorFit:
     bins = sweep_bins(ctx)
     if family == "resonance":
         return _fit(bins, family, _resonance_starts(ctx, bins))
-    corners = (10.0, 40.0, 150.0) if family == "highpass" else (800.0, 2500.0, 8000.0)
+    corners = np.geomspace(*(HIGHPASS_RANGE if family == "highpass" else LOWPASS_RANGE), 12)
     fits = [_fit(bins, family, [{"corner_hz": c, "order": order} for c in corners]) for order in (1, 2)]
     # The second order must pay for itself.
     return fits[1] if fits[1].rms * SIMPLER < fits[0].rms else fits[0]
@@ -204,6 +202,9 @@ def _explain(fit: FactorFit, gain: float, fs: float) -> tuple[str, str]:
 
 def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
     """One finding per family of series factors; at most one of them significant."""
+    if ctx.excess < EXCESS:
+        return [finding(family, False, 0.0, {}, "not tested: the model is at the noise floor", "none")
+                for family in FAMILIES]
     before = sweep_bins(ctx).rms()
     floor = ctx.comparison.noise_floor
     fits = {family: fit_factor(ctx, family) for family in FAMILIES}
@@ -213,19 +214,17 @@ def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
     for other in ranked[1:]:
         if other.parameter_count < leader.parameter_count and other.rms <= SIMPLER * leader.rms:
             leader = other
-    ctx.cache["dynamics_leader"] = leader
     findings = []
     for family in FAMILIES:
         fit = fits[family]
         gain = before / fit.rms if fit.rms > 0 else 0.0
         excess_power = max(before**2 - floor**2, 1e-300)
         share = (before**2 - fit.rms**2) / excess_power
-        significant = (fit is leader and gain >= GAIN and share >= SHARE and ctx.excess >= EXCESS and fit.interior
+        significant = (fit is leader and gain >= GAIN and share >= SHARE and fit.interior
                        and (family != "resonance" or abs(fit.params["gain_db"]) >= MIN_GAIN_DB))
         explanation, remedy = _explain(fit, gain, ctx.fs)
         if not significant:
-            reason = ("the model is at the noise floor" if ctx.excess < EXCESS else
-                      f"{leader.family} explains the sweeps better" if fit is not leader else
+            reason = (f"{leader.family} explains the sweeps better" if fit is not leader else
                       "the best fit lies at the edge of the family's range" if not fit.interior else
                       f"a {fit.params['gain_db']:+.1f} dB peak is no resonance" if gain >= GAIN and share >= SHARE else
                       f"it removes only {100 * max(share, 0):.0f} % of the error above the noise floor")
@@ -235,7 +234,6 @@ def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
         findings.append(finding(family, significant, gain / GAIN, params, explanation, remedy,
                                 {"rms_over_floor": ctx.excess, "rms_gain": gain, "explained_share": share,
                                  "rms_with_factor": fit.rms}))
-    arbitrate(findings, ctx)
     leading = next((f for f in findings if f["significant"]), None)
     if leading is not None:
         # Later detectors judge what the factor leaves (a big linear misfit correlates with u^3 too).
@@ -268,16 +266,16 @@ def with_series_factor(ctx: DiagnosisContext, x: np.ndarray) -> np.ndarray:
     return scipy.signal.lfilter(*ctx.cache["series_factor"], x)
 
 
-def arbitrate(findings: list[dict], ctx: DiagnosisContext) -> None:
-    """When the delay (``ctx.cache["delay_finding"]``) and a series factor are both significant, keep
-    the one that explains the sweeps better.
+def arbitrate(delay: dict, ctx: DiagnosisContext) -> None:
+    """When the delay finding and a series factor (``dynamics_findings``, run before) are both
+    significant, keep the one that explains the sweeps better.
 
     Both are factors in series with the model: z^-d against the fitted family on the
-    same sweep bins. The loser is marked not significant, with the reason.
+    same sweep bins. The loser is marked not significant, with the reason; a factor
+    that loses no longer shapes what later detectors see.
     """
-    delay = ctx.cache.get("delay_finding")
-    factor = next((f for f in findings if f["effect"] in FAMILIES and f["significant"]), None)
-    if delay is None or factor is None or not delay["significant"]:
+    factor = ctx.cache.get("series_factor_finding")
+    if factor is None or not delay["significant"]:
         return
     bins = sweep_bins(ctx)
     delay_rms = bins.rms(lambda f: np.exp(-2j * np.pi * f * delay["params"]["samples"] / bins.fs))
@@ -286,3 +284,5 @@ def arbitrate(findings: list[dict], ctx: DiagnosisContext) -> None:
     loser["significant"] = False
     loser["explanation"] = f"not significant ({winner['effect']} explains the sweeps better); " + loser["explanation"]
     loser["remedy"] = "none"
+    if loser is factor:
+        del ctx.cache["series_factor"], ctx.cache["series_factor_finding"]

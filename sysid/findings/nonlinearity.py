@@ -25,12 +25,15 @@ CHI2 = 100.0
 PLAUSIBLE_DB = -10.0
 
 
-def polynomial_columns(model, u: np.ndarray, degree: int = 3) -> np.ndarray:
-    """Columns L(u^k) for k = 1..degree (even powers centred), L the model's linear part."""
+def polynomial_columns(model, u: np.ndarray, degree: int = 3, prediction: np.ndarray | None = None) -> np.ndarray:
+    """Columns L(u^k) for k = 1..degree (even powers centred), L the model's linear part.
+
+    The first column is the model's prediction, which ``prediction`` supplies when known.
+    """
     linear = linear_part(model)
     base = model.apply_input_nonlinearity(u)
-    columns = []
-    for k in range(1, degree + 1):
+    columns = [] if prediction is None else [prediction]
+    for k in range(len(columns) + 1, degree + 1):
         x = base**k
         if k % 2 == 0:
             x = x - x.mean()
@@ -42,7 +45,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     first = int(round(SKIP_S * ctx.fs))
     rows, targets = [], []
     for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
-        columns = polynomial_columns(ctx.model, sweep.u)
+        columns = polynomial_columns(ctx.model, sweep.u, prediction=record["linear"])
         residual = record["residual"]
         if "series_factor" in ctx.cache:
             # What a significant series factor leaves: the factor applies to every column.

@@ -34,7 +34,7 @@ def _frequency_axis(ax, t: np.ndarray, frequency: np.ndarray):
 def sweep_prediction_figure(record: dict, zoom_s: float = 0.02, dpi: float = 100.0):
     """Measured vs predicted ear signal on one sweep, the error alone, and a zoom where the error peaks.
 
-    ``record`` is one ``Comparison.per_sweep`` entry (keys path, u, measured, predicted,
+    ``record`` is one ``Comparison.per_sweep`` entry (keys path, u, measured, linear, predicted,
     residual, fs). In the upper two panels the dashed brown curve (right axis) is the
     sweep's instantaneous frequency, so a burst of error reads as a frequency; in the
     zoom the error has its own scale on the right axis.
