@@ -31,6 +31,7 @@ COST_RATIO = 1.05
 EXCESS = 1.2
 CLEAR_RATIO = 1.5
 REFIT_GAIN = 1.25
+FACTOR_EXPLAINS = 2.0
 
 
 def _scan_data(ctx: DiagnosisContext) -> BlockData:
@@ -113,8 +114,11 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
     # moves the fixed-pole cost little; a quick refit with and without it decides.
     significant = extra >= 1 and ratio >= COST_RATIO and (ctx.excess >= EXCESS or ratio >= CLEAR_RATIO)
     refit_gain = None
-    # The slower checks below are for an error nothing else explains; a series factor may.
-    if not significant and ctx.excess >= EXCESS and "series_factor" not in ctx.cache:
+    # The slower checks below are for an error nothing else explains; a series factor that
+    # brings the sweeps near the noise floor does.
+    factor = ctx.cache.get("series_factor_finding")
+    explained = factor is not None and factor["evidence"]["rms_with_factor"] <= FACTOR_EXPLAINS * ctx.comparison.noise_floor
+    if not significant and ctx.excess >= EXCESS and not explained:
         if extra < 1 or ratio < COST_RATIO:
             # The model's poles may be bent to mimic the delay: scan with generic poles.
             generic = generic_scan(ctx)

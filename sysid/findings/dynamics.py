@@ -40,7 +40,7 @@ from . import DiagnosisContext, finding
 __all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins", "sweep_bins", "FactorFit", "fit_factor", "FAMILIES"]
 
 GAIN = 1.25
-SHARE = 0.5
+SHARE = 0.8
 EXCESS = 1.2
 SIMPLER = 1.03
 # Bounds of the fitted parameters. Q beyond 30 would let a line fit a hum bin; below 1 a
@@ -279,6 +279,9 @@ def arbitrate(delay: dict, ctx: DiagnosisContext) -> None:
         return
     bins = sweep_bins(ctx)
     delay_rms = bins.rms(lambda f: np.exp(-2j * np.pi * f * delay["params"]["samples"] / bins.fs))
+    if delay["evidence"].get("refit_gain"):
+        # Found by refits (the model's poles were bent to mimic it): judged by what the refit reaches.
+        delay_rms = min(delay_rms, ctx.comparison.rms / delay["evidence"]["refit_gain"])
     factor_rms = factor["evidence"]["rms_with_factor"]
     loser, winner = (factor, delay) if delay_rms <= factor_rms else (delay, factor)
     loser["significant"] = False
