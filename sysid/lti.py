@@ -117,15 +117,23 @@ def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndar
         x0_modal = V_inv @ x0
         c_modal = C[0] @ V
         t = np.arange(u.size)
-        y = np.zeros(u.size, dtype=complex)
+        y = np.zeros(u.size)
         for p, b, c, x0_i in zip(poles, b_modal, c_modal, x0_modal):
-            # Mode i: x_i(t+1) = p x_i(t) + b_i u(t), a first-order IIR; conjugate
-            # modes add conjugate contributions, so the sum is real.
-            mode = scipy.signal.lfilter([0.0, b], [1.0, -p], u.astype(complex))
+            # Mode i: x_i(t+1) = p x_i(t) + b_i u(t), a first-order IIR. A real A gives
+            # conjugate modes conjugate contributions (LAPACK returns conjugate
+            # eigenvectors), so each pair is one filter counted twice in the real part.
+            if p.imag < 0:
+                continue
+            if p.imag == 0:
+                mode = scipy.signal.lfilter([0.0, b.real], [1.0, -p.real], u)
+                weight = 1.0
+            else:
+                mode = scipy.signal.lfilter([0.0, b], [1.0, -p], u.astype(complex))
+                weight = 2.0
             if x0_i != 0:
                 mode = mode + x0_i * p ** t
-            y += c * mode
-        return D * u + y.real
+            y += weight * (c * mode).real
+        return D * u + y
     _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
     return y[:, 0]
 

@@ -2,23 +2,27 @@
 
 What a model lacks in series with it shows on the sweeps as the ratio of the
 measured to the predicted ear signal. For each family of factors F_theta of
-``sysid.structures`` the parameters are fitted by nonlinear least squares to the
-sweeps' DFT bins inside the validation band,
+``sysid.structures`` the parameters are fitted to the sweeps' DFT bins inside the
+validation band,
 
     min_theta  sum_sweeps (2 / L) sum_k |Y_k - F_theta(f_k) P_k|^2,
 
 where P_k is the model's prediction (its input polynomial, delay and core) and Y_k
 the measured ear signal without the model's disturbance lines. With F = 1 this is
 ``compare``'s rms (Parseval), so the fitted cost is the validation rms the model
-would have with the factor in series. Families:
+would have with the factor in series. The search scores a coarse grid of starting
+points, then runs a bounded quasi-Newton search (L-BFGS-B) from the best one, on
+the bins compressed to 1 Hz cells (``sysid.validation.CompressedValidation``).
+Families:
 
 - ``resonance``: the peaking biquad (f0, Q, gain in dB) - a mode the model lacks;
 - ``highpass``: first or second order, corner in Hz - a microphone or codec DC filter;
 - ``lowpass``: first or second order Butterworth - an anti-alias or reconstruction filter.
 
-A family is the finding when it lowers the rms by ``GAIN``, removes at least
-``SHARE`` of the error power above the noise floor, and the model is ``EXCESS``
-above the floor. Among families within ``SIMPLER`` of each other the one with fewer
+Nothing is fitted when the model is within ``EXCESS`` of the noise floor. A
+family is the finding when it lowers the rms by ``GAIN``, removes at least
+``SHARE`` of the error power above the noise floor, and its fit is not held at a
+bound of its parameters. Among families within ``SIMPLER`` of each other the one with fewer
 parameters wins (a peaking factor with a low f0 imitates a high-pass shelf). The
 other families are reported, not significant. ``arbitrate`` (called by the delay
 detector, which runs next) settles a tie with a delay: both are series factors, and
@@ -37,7 +41,8 @@ from .. import structures
 from ..validation import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
 from . import DiagnosisContext, finding
 
-__all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins", "sweep_bins", "FactorFit", "fit_factor", "FAMILIES"]
+__all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins",
+           "sweep_bins", "FactorFit", "fit_factor", "FAMILIES"]
 
 GAIN = 1.25
 SHARE = 0.8
@@ -56,7 +61,8 @@ LOWPASS_RANGE = (150.0, 20000.0)
 FAMILIES = ("resonance", "highpass", "lowpass")
 # The fits run on the sweeps compressed to cells this wide (``sysid.validation.CompressedValidation``);
 # the chosen factor's rms is then evaluated exactly.
-CELL_HZ = 0.5
+CELL_HZ = 1.0
+RESONANCE_SEARCHES = 3
 
 
 @dataclass
@@ -106,8 +112,8 @@ class FactorFit:
     interior: bool
 
 
-def _fit(bins: SweepBins, family: str, starts: list[dict]) -> FactorFit:
-    """Best fit of one family from the best of several starting points (bounded quasi-Newton on the compressed rms)."""
+def _fit(bins: SweepBins, family: str, starts: list[dict], searches: int = 1) -> FactorFit:
+    """Best fit of one family: quasi-Newton searches from the ``searches`` best of the starting points."""
     top = min(bins.spectra[0].frequencies.max(), 0.95 * bins.fs / 2)
     cells = bins.compressed.frequencies
     if family == "resonance":
@@ -143,20 +149,25 @@ def _fit(bins: SweepBins, family: str, starts: list[dict]) -> FactorFit:
     def cost(x):
         return float(bins.compressed.rms(on_cells(x))[0])
 
-    # The starting points are scored together; the quasi-Newton search runs from the best one.
+    # The starting points are scored together; the bounded quasi-Newton searches run from the best.
     x0s = [[min(max(v, lo), hi) for v, (lo, hi) in zip(pack(start), bounds)] for start in starts]
     scores = bins.compressed.rms(np.array([on_cells(x) for x in x0s]))
-    result = scipy.optimize.minimize(cost, x0s[int(np.argmin(scores))], method="L-BFGS-B", bounds=bounds,
-                                     options={"maxiter": 60})
-    best = (result.fun, unpack(result.x), interior(result.x))
+    best = None
+    for k in np.argsort(scores)[:searches]:
+        result = scipy.optimize.minimize(cost, x0s[k], method="L-BFGS-B", bounds=bounds, options={"maxiter": 60})
+        if best is None or result.fun < best[0]:
+            best = (result.fun, unpack(result.x), interior(result.x))
     params = best[1]
     rms = bins.rms(lambda f: factor_response(family, params, f, bins.fs))
     return FactorFit(family, params, rms, len(bounds), best[2])
 
 
-def _resonance_starts(ctx: DiagnosisContext, bins: SweepBins) -> list[dict]:
-    """A coarse grid over the band: f0 log-spaced, a few Q, a peak and a dip."""
-    f0 = np.geomspace(F0_RANGE[0], F0_RANGE[1] * VALIDATION_BAND[1], 24)
+def _resonance_starts(ctx: DiagnosisContext) -> list[dict]:
+    """A grid over the band (f0 11 % apart, a few Q, a peak and a dip) and the worst bands' centres."""
+    top = F0_RANGE[1] * VALIDATION_BAND[1]
+    f0 = list(np.geomspace(F0_RANGE[0], top, 48))
+    rows = [r for r in ctx.comparison.bands if F0_RANGE[0] <= r["center_hz"] <= top and np.isfinite(r["ratio"])]
+    f0 += [r["center_hz"] for r in sorted(rows, key=lambda r: -r["ratio"])[:2]]
     return [{"f0_hz": f, "q": q, "gain_db": g} for f in f0 for q in (2.0, 6.0, 18.0) for g in (-6.0, 6.0)]
 
 
@@ -164,7 +175,8 @@ def fit_factor(ctx: DiagnosisContext, family: str) -> FactorFit:
     """The best series factor of one family for the model on the context's sweeps."""
     bins = sweep_bins(ctx)
     if family == "resonance":
-        return _fit(bins, family, _resonance_starts(ctx, bins))
+        # A narrow mode makes the cost a sharp valley in f0: several searches, from distinct starts.
+        return _fit(bins, family, _resonance_starts(ctx), searches=RESONANCE_SEARCHES)
     corners = np.geomspace(*(HIGHPASS_RANGE if family == "highpass" else LOWPASS_RANGE), 12)
     fits = [_fit(bins, family, [{"corner_hz": c, "order": order} for c in corners]) for order in (1, 2)]
     # The second order must pay for itself.
