@@ -175,7 +175,8 @@ def timing(sessions: int) -> None:
                                 reference=any(e.startswith(FACTORS) for e in effects))
                 label = "+".join(effects) or "clean"
                 after = f"{r['before']:.2f} -> {r['after']:.2f}" if effects else f"{r['before']:.2f}"
-                print(f"| {path} | {label} | {r['t_diagnose']:.2f} | {r.get('t_refine', float('nan')):.1f} | {after} |",
+                refine_s = f"{r['t_refine']:.1f}" if "t_refine" in r else "-"
+                print(f"| {path} | {label} | {r['t_diagnose']:.2f} | {refine_s} | {after} |",
                       flush=True)
 
 
