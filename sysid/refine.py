@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.signal
 
 from .compare import Comparison, compare, fit_sinusoids
@@ -48,11 +47,12 @@ from .findings.dynamics import GAIN as FACTOR_GAIN, fit_factor
 from .findings.input_noise import input_noise_density
 from .findings.disturbance import disturbance_finding
 from .findings.nonlinearity import nonlinearity_finding
+from .findings.under_modelled import START_Q, worst_bands
 from .identify import IdentificationOptions, identify
 from .model import Model
 from .output_error import block_data, refine_output_error
 from .recordings import Recording
-from .structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace
+from .structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "refine", "refine_auto",
            "format_refinement", "parse_refinement"]
@@ -184,23 +184,23 @@ def _periodic(model, noise, sweeps, params, options, transient_s):
 def _order(model, noise, sweeps, params, options, transient_s):
     """More order: modes added at the worst bands and refined, or a fresh fit up to the higher order."""
     extra = params["extra_order"]
-    ctx = DiagnosisContext(model, noise, sweeps, compare(model, sweeps), transient_s)
     data = _output_error_data(model, noise, transient_s, (options or REFIT_OPTIONS).refine_seconds)
-    bands = sorted((r for r in ctx.comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= 4000.0),
-                   key=lambda r: -r["ratio"])
-    blocks = [mode_block(r["center_hz"], 3.0, model.fs) for r in bands[: extra // 2]]
+    blocks = [mode_block(r["center_hz"], START_Q, model.fs) for r in worst_bands(compare(model, sweeps), extra // 2)]
     if extra % 2:
         blocks.append(np.array([[0.9]]))
-    added = sum(b.shape[0] for b in blocks)
-    A = scipy.linalg.block_diag(model.A, *blocks)
-    oe = refine_output_error(A, np.vstack([model.B, np.zeros((added, 1))]), np.hstack([model.C, np.zeros((1, added))]),
-                             model.D, data, delay=model.delay, feedthrough=bool(model.D[0, 0]))
-    grown = _with(model, (oe.A, oe.B, oe.C, oe.D))
+    grown = _grown(model, data, blocks)
     core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
                        model.disturbance_frequencies, options, transient_s, extra_order=extra)
     fresh = _with(model, _core(core), identification=dict(core.identification))
     best = min([t for t in (grown, fresh) if t.stable] or [grown], key=lambda t: compare(t, sweeps).rms)
     return best, {"order": best.order}
+
+
+def _grown(model, data, blocks) -> Model:
+    """The model with new state blocks, all poles and zeros refined by output error on data."""
+    A, B, C = with_states(model.A, model.B, model.C, *blocks)
+    oe = refine_output_error(A, B, C, model.D, data, delay=model.delay, feedthrough=bool(model.D[0, 0]))
+    return _with(model, (oe.A, oe.B, oe.C, oe.D))
 
 
 def _output_error_data(model, noise, transient_s, seconds):
@@ -240,11 +240,8 @@ def _factor(kind):
 
 def _mode(model, noise, sweeps, params, options, transient_s):
     data = _output_error_data(model, noise, transient_s, (options or REFIT_OPTIONS).refine_seconds)
-    A = scipy.linalg.block_diag(model.A, mode_block(params["f0_hz"], params["q"], model.fs))
-    B = np.vstack([model.B, np.zeros((2, 1))])
-    C = np.hstack([model.C, np.zeros((1, 2))])
-    oe = refine_output_error(A, B, C, model.D, data, delay=model.delay, feedthrough=bool(model.D[0, 0]))
-    return _with(model, (oe.A, oe.B, oe.C, oe.D)), {"order": int(oe.A.shape[0])}
+    grown = _grown(model, data, [mode_block(params["f0_hz"], params["q"], model.fs)])
+    return grown, {"order": grown.order}
 
 
 def _input_noise(model, noise, sweeps, params, options, transient_s):

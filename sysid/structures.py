@@ -17,10 +17,12 @@ effects.md:
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 import scipy.signal
 
 __all__ = ["StateSpace", "series", "tf_to_statespace", "highpass_factor", "lowpass_factor", "resonance_factor",
-           "factor_coefficients", "factor_response", "mode_block"]
+           "factor_coefficients", "factor_response", "mode_block",
+           "with_states"]
 
 StateSpace = tuple  # (A, B, C, D) of a SISO system, numpy arrays of shapes (n,n), (n,1), (1,n), (1,1)
 
@@ -83,6 +85,17 @@ def factor_response(b, a, frequencies_hz, fs: float) -> np.ndarray:
     # Horner in z^-1 (as scipy.signal.freqz with explicit frequencies, without its overhead).
     z1 = np.exp(-2j * np.pi * np.asarray(frequencies_hz, float) / fs)
     return np.polyval(np.asarray(b, float)[::-1], z1) / np.polyval(np.asarray(a, float)[::-1], z1)
+
+
+def with_states(A, B, C, *blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) with new state blocks on the diagonal, not yet coupled to the input or output.
+
+    The start of a refit that adds dynamics: the response is unchanged until the
+    refit gives the new states their input and output weights.
+    """
+    added = sum(np.shape(b)[0] for b in blocks)
+    return (scipy.linalg.block_diag(A, *blocks), np.vstack([B, np.zeros((added, 1))]),
+            np.hstack([C, np.zeros((1, added))]))
 
 
 def mode_block(f0_hz: float, q: float, fs: float) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, linear_part
-from .dynamics import factor_residual, with_series_factor
+from .dynamics import with_series_factor
 
 __all__ = ["nonlinearity_finding", "polynomial_columns"]
 
@@ -49,8 +49,9 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
         residual = record["residual"]
         if "series_factor" in ctx.cache:
             # What a significant series factor leaves: the factor applies to every column.
-            residual = factor_residual(ctx, residual, columns[:, 0])
-            columns = np.stack([with_series_factor(ctx, c) for c in columns.T], axis=1)
+            filtered = np.stack([with_series_factor(ctx, c) for c in columns.T], axis=1)
+            residual = residual + columns[:, 0] - filtered[:, 0]
+            columns = filtered
         rows.append(columns[first:])
         targets.append(residual[first:])
     X = np.vstack(rows)

@@ -12,23 +12,25 @@ spread over a band rather than shaped like any one factor.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
-from ..structures import mode_block
+from ..compare import Comparison
+from ..structures import mode_block, with_states
+from ..validation import VALIDATION_BAND
 from . import DiagnosisContext, finding
 from .delay import refit_rms
 
-__all__ = ["under_modelled_finding", "worst_band"]
+__all__ = ["under_modelled_finding", "worst_bands", "START_Q"]
 
 GAIN = 1.25
 EXCESS = 1.2
 START_Q = 3.0
 
 
-def worst_band(ctx: DiagnosisContext) -> dict:
-    """The third-octave band (row of the comparison's table) with the largest error over noise."""
-    rows = [r for r in ctx.comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= 4000.0]
-    return max(rows, key=lambda r: r["ratio"])
+def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
+    """The third-octave bands (rows of the comparison's table) in the validation band with the
+    largest error over noise, worst first."""
+    rows = [r for r in comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= VALIDATION_BAND[1]]
+    return sorted(rows, key=lambda r: -r["ratio"])[:count]
 
 
 def under_modelled_finding(ctx: DiagnosisContext) -> dict:
@@ -37,10 +39,8 @@ def under_modelled_finding(ctx: DiagnosisContext) -> dict:
     if ctx.excess < EXCESS or explained:
         reason = "the model is at the noise floor" if ctx.excess < EXCESS else "a named effect explains the error"
         return finding("under-modelled", False, 0.0, {"order": model.order}, f"not tested: {reason}", "none")
-    band = worst_band(ctx)
-    A = scipy.linalg.block_diag(model.A, mode_block(band["center_hz"], START_Q, model.fs))
-    B = np.vstack([model.B, np.zeros((2, 1))])
-    C = np.hstack([model.C, np.zeros((1, 2))])
+    band = worst_bands(ctx.comparison)[0]
+    A, B, C = with_states(model.A, model.B, model.C, mode_block(band["center_hz"], START_Q, model.fs))
     reference = refit_rms(ctx, model.A, model.B, model.C, model.D, model.delay)
     larger = refit_rms(ctx, A, B, C, model.D, model.delay, max_iterations=30)
     gain = ctx.comparison.rms / larger if larger > 0 else 0.0
