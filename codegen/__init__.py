@@ -11,7 +11,7 @@ The pipeline (design reference, "Firmware generation"):
 ``reference``   bit-exact fixed-point, float32 and float64 Python references;
 ``render``      jinja2 templates (``codegen.templates``) and atomic output directories;
 ``build``       cffi host builds cached by source hash; ``verify`` the C against the references;
-``api``/``cli`` the front ends (``generate_firmware``, ``generate-firmware``).
+``api`` the Python front end (``generate_firmware``); the command line is ``helmet_anc``.
 """
 
 __all__ = ["__version__"]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.io.wavfile
 
-from sysid.cli import main
+from helmet_anc.cli import main
 from sysid.model import Model
 from sysid.recordings import write_wav16
 

@@ -8,7 +8,7 @@ import sys
 import pytest
 from conftest_codegen import appendix_a_model
 
-from codegen.cli import build_parser, main
+from helmet_anc.firmware_cli import build_parser, main
 from codegen.errors import InvalidNameError
 from codegen.render import validate_name
 from sysid.model import Model
@@ -135,7 +135,7 @@ def test_validate_name_accepts_plain_identifiers():
 
 
 def test_console_entry_runs_as_module(model_file, tmp_path):
-    result = subprocess.run([sys.executable, "-m", "codegen.cli", str(model_file), "-o", str(tmp_path / "o"),
+    result = subprocess.run([sys.executable, "-m", "helmet_anc.firmware_cli", str(model_file), "-o", str(tmp_path / "o"),
                              "--name", "static"], capture_output=True, text=True, check=False)
     assert result.returncode == 2 and result.stderr.count("\n") == 1
 

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from sysid.cli import main
+from helmet_anc.cli import main
 from sysid.model import Model
 
 

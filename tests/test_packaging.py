@@ -16,7 +16,7 @@ def _config():
 
 def test_every_package_folder_is_listed():
     listed = set(_config()["tool"]["setuptools"]["packages"])
-    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("sysid", "codegen")
+    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("helmet_anc", "sysid", "codegen")
              for p in (ROOT / top).rglob("__init__.py") if "__pycache__" not in p.parts}
     assert found <= listed, f"packages missing from pyproject.toml: {sorted(found - listed)}"
 
@@ -30,7 +30,7 @@ def test_templates_are_shipped_as_package_data():
 
 def test_console_scripts():
     scripts = _config()["project"]["scripts"]
-    assert scripts == {"helmet-anc": "sysid.cli:main", "generate-firmware": "codegen.cli:main"}
+    assert scripts == {"helmet-anc": "helmet_anc.cli:main", "generate-firmware": "helmet_anc.firmware_cli:main"}
 
 
 def test_templates_are_found_from_the_installed_package_or_the_checkout():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sysid.cli import main
+from helmet_anc.cli import main
 from sysid.compare import compare
 from sysid.errors import HelmetAncError
 from sysid.model import Model

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import short_spec
 
-from sysid.cli import main
+from helmet_anc.cli import main
 from sysid.diagnose import diagnose
 from sysid.model import Model
 from sysid.plants import appendix_a_model

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from ..errors import HelmetAncError
-from ..model import Model
-from ..recordings import load_recording
-from ..report.data import GRID_CHOICES
+from sysid.errors import HelmetAncError
+from sysid.model import Model
+from sysid.recordings import load_recording
+from sysid.report.data import GRID_CHOICES
 from .common import add_recording_options, check_output, load_sweeps
 
 ORDER = 60
@@ -29,7 +29,7 @@ def run(args) -> int:
     model = Model.load(args.model)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
-    from ..report.html import (
+    from sysid.report.html import (
         write_report,  # matplotlib loads only when a report is made
     )
 

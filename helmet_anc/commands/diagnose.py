@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-from ..diagnose import diagnose, format_findings
-from ..model import Model, atomic_write_text
-from ..recordings import load_recording
+from sysid.diagnose import diagnose, format_findings
+from sysid.model import Model, atomic_write_text
+from sysid.recordings import load_recording
 from .common import add_recording_options, check_output, load_sweeps
 
 ORDER = 31

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import HelmetAncError
-from ..identify import Identification
-from ..recordings import load_recording
+from sysid.errors import HelmetAncError
+from sysid.identify import Identification
+from sysid.recordings import load_recording
 
 __all__ = ["add_recording_options", "load_sweeps", "check_output", "check_report_target", "identification_summary"]
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import HelmetAncError
-from ..grid import terminal_progress
-from ..identify import identify
-from ..model import atomic_write_text
-from ..simulate import SessionSpec, simulate_session, write_session
+from sysid.errors import HelmetAncError
+from sysid.grid import terminal_progress
+from sysid.identify import identify
+from sysid.model import atomic_write_text
+from sysid.simulate import SessionSpec, simulate_session, write_session
 from .common import identification_summary
 
 # The hidden effects of the demo's second FF session: 23 samples of extra converter
@@ -43,9 +43,9 @@ def _firmware(model, outdir: Path, sweep_files) -> str:
 
 def _refinement_loop(model, outdir: Path, seed: int):
     """Diagnose the FF model on a session with hidden effects, refine until done, print each step."""
-    from ..compare import compare
-    from ..diagnose import diagnose, format_findings
-    from ..refine import format_refinement, refine_auto
+    from sysid.compare import compare
+    from sysid.diagnose import diagnose, format_findings
+    from sysid.refine import format_refinement, refine_auto
 
     session = simulate_session(SessionSpec(path="ff", seed=seed + 1), effects=DEMO_EFFECTS)
     write_session(session, outdir / "ff-remeasured")
@@ -78,7 +78,7 @@ def run(args) -> int:
     print(f"models written to {outdir}/fb_model.json and {outdir}/ff_model.json")
     refined = _refinement_loop(models["ff"][0], outdir, args.seed)
     if not args.no_report:
-        from ..report import write_report
+        from sysid.report import write_report
 
         (outdir / "reports").mkdir(exist_ok=True)
         for path, (model, files, result, session) in models.items():

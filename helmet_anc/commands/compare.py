@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from ..compare import compare, format_comparison
-from ..model import Model, atomic_write_text
+from sysid.compare import compare, format_comparison
+from sysid.model import Model, atomic_write_text
 from .common import add_recording_options, check_output, load_sweeps
 
 ORDER = 30

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from ..grid import parse_range, terminal_progress
-from ..identify import IdentificationOptions, identify
-from ..model import atomic_write_text
-from ..recordings import load_recording
-from ..spectra import ESTIMATORS
+from sysid.grid import parse_range, terminal_progress
+from sysid.identify import IdentificationOptions, identify
+from sysid.model import atomic_write_text
+from sysid.recordings import load_recording
+from sysid.spectra import ESTIMATORS
 from .common import add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
 
 ORDER = 20
@@ -43,7 +43,7 @@ def run(args) -> int:
     if mat:
         result.model.save_mat(mat)
     if report_target:
-        from ..report import write_report
+        from sysid.report import write_report
 
         report = write_report(report_target, result.model, noise, sweeps, identification=result)
         print(f"wrote {report}")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import HelmetAncError
-from ..model import Model
-from ..recordings import load_recording
-from ..refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
+from sysid.errors import HelmetAncError
+from sysid.model import Model
+from sysid.recordings import load_recording
+from sysid.refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
 from .common import add_recording_options, check_output, check_report_target, load_sweeps
 
 ORDER = 32
@@ -49,7 +49,7 @@ def run(args) -> int:
     print(format_refinement(steps))
     print(f"wrote {output}")
     if report_target:
-        from ..report import write_report
+        from sysid.report import write_report
 
         print(f"wrote {write_report(report_target, model, noise, sweeps)}")
     return 0

@@ -1,6 +1,6 @@
 """The ``helmet-anc`` command line.
 
-Subcommands live in ``sysid.commands`` (one module each, found at start-up). Every
+Subcommands live in ``helmet_anc.commands`` (one module each, found at start-up). Every
 user error ends in one line on stderr, ``helmet-anc <command>: error: ...``, and
 exit status 2; nothing is written unless the command succeeds.
 """
@@ -14,8 +14,8 @@ import sys
 import warnings
 
 from . import commands as command_package
-from .errors import HelmetAncError
-from .recordings import RecordingWarning
+from sysid.errors import HelmetAncError
+from sysid.recordings import RecordingWarning
 
 __all__ = ["main", "build_parser"]
 

@@ -16,6 +16,6 @@ def register(commands) -> None:
 
 def run(args) -> int:
     # The front end is the one place that reaches both packages (design.md, "Layout").
-    from codegen.cli import main as firmware_main
+    from ..firmware_cli import main as firmware_main
 
     return firmware_main(args.args)

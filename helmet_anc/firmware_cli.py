@@ -10,10 +10,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import __version__
-from .api import format_verification_table, generate_firmware
-from .errors import CodegenError
-from .plan import TARGETS, VARIANTS
+from codegen import __version__
+from codegen.api import format_verification_table, generate_firmware
+from codegen.errors import CodegenError
+from codegen.plan import TARGETS, VARIANTS
 
 __all__ = ["build_parser", "main"]
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ..errors import HelmetAncError
-from ..effect_spec import parse_effect
-from ..simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
+from sysid.errors import HelmetAncError
+from sysid.effect_spec import parse_effect
+from sysid.simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
 
 ORDER = 10
 
