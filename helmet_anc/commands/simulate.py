@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sysid.errors import HelmetAncError
 from sysid.effect_spec import parse_effect
+from sysid.random_plant import random_session
 from sysid.simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
 
 ORDER = 10
@@ -13,10 +14,14 @@ def register(commands) -> None:
     parser = commands.add_parser("simulate", help="write a synthetic session (noise.wav, sweep1/2.wav, truth.json)")
     parser.add_argument("outdir")
     parser.add_argument("--path", choices=("fb", "ff"), default="fb")
+    parser.add_argument("--plant", choices=("appendix-a", "random"), default="appendix-a",
+                        help="true plant: the seed's appendix-A model of --path, or a random plausible helmet path "
+                             "drawn from --seed (its own sample rate, latency and sensor noise)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--noise-seconds", type=float, default=20.0)
     parser.add_argument("--sweep-seconds", type=float, default=5.0)
-    parser.add_argument("--output-noise", type=float, default=2e-4, help="ear-microphone noise RMS (FS)")
+    parser.add_argument("--output-noise", type=float, default=None,
+                        help="ear-microphone noise RMS (FS); default 2e-4, or the random plant's own")
     parser.add_argument("--input-noise", type=float, default=2e-5, help="input-channel noise RMS (FS)")
     parser.add_argument("--effect", action="append", default=[], metavar="KIND[:PARAMS]",
                         help="hidden effect, repeatable: " + ", ".join(SIMULATED_EFFECTS) + " (e.g. delay:23, resonance:3400,8,10)")
@@ -24,15 +29,23 @@ def register(commands) -> None:
 
 
 def run(args) -> int:
-    spec = SessionSpec(path=args.path, seed=args.seed, noise_duration=args.noise_seconds, sweep_duration=args.sweep_seconds,
-                       output_noise=args.output_noise, input_noise=args.input_noise)
+    output_noise = {} if args.output_noise is None else {"output_noise": args.output_noise}
+    settings = dict(noise_duration=args.noise_seconds, sweep_duration=args.sweep_seconds,
+                    input_noise=args.input_noise, **output_noise)
+    spec = SessionSpec(path=args.path, seed=args.seed, **settings)
     if args.noise_seconds <= spec.transient_s + 0.2:
         raise HelmetAncError(f"--noise-seconds must exceed the {spec.transient_s:g} s transient; found {args.noise_seconds:g}")
     if args.sweep_seconds <= 0.1:
         raise HelmetAncError(f"--sweep-seconds must be above 0.1; found {args.sweep_seconds:g}")
-    if args.output_noise < 0 or args.input_noise < 0:
+    if args.seed < 0:
+        raise HelmetAncError(f"--seed must be a non-negative whole number; found {args.seed}")
+    if (args.output_noise is not None and args.output_noise < 0) or args.input_noise < 0:
         raise HelmetAncError("noise levels must be non-negative")
     effects = [parse_effect(text, SIMULATED_EFFECTS) for text in args.effect]
-    files = write_session(simulate_session(spec, effects=effects), args.outdir)
+    if args.plant == "random":
+        session = random_session(args.seed, args.path, effects=effects, **settings)
+    else:
+        session = simulate_session(spec, effects=effects)
+    files = write_session(session, args.outdir)
     print(f"wrote {', '.join(str(p) for p in files.values())}")
     return 0
