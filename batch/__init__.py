@@ -18,7 +18,8 @@ from .manifest import SessionEntry, read_sessions
 from .nominal import NominalModel, nominal_model
 from .riders import RiderSpread, rider_variant
 from .runners import run_dask, run_local
+from .simulated import write_simulated_campaign
 from .task import SessionTask, input_hash, run_session
 
 __all__ = ["BatchResult", "run_batch", "SessionEntry", "read_sessions", "NominalModel", "nominal_model",
-           "RiderSpread", "rider_variant", "run_dask", "run_local", "SessionTask", "input_hash", "run_session"]
+           "RiderSpread", "rider_variant", "run_dask", "run_local", "write_simulated_campaign", "SessionTask", "input_hash", "run_session"]

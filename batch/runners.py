@@ -24,6 +24,8 @@ __all__ = ["run_local", "run_dask", "default_workers", "DEFAULT_RETRIES"]
 
 # A task is tried this many more times after its worker died under it.
 DEFAULT_RETRIES = 2
+# Seconds to wait for a Dask scheduler before giving up on its address.
+CONNECT_TIMEOUT_S = 10
 
 
 def default_workers() -> int:
@@ -91,7 +93,7 @@ def run_dask(tasks: list[SessionTask], scheduler=None, retries: int = DEFAULT_RE
 
     own_client = not isinstance(scheduler, Client)
     try:
-        client = Client(scheduler) if own_client else scheduler
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT_S) if own_client else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
         from sysid.errors import HelmetAncError
 
