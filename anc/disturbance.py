@@ -1,0 +1,151 @@
+"""The noise to cancel: spectra at the chin reference and at the ear with ANC off.
+
+A ``Disturbance`` holds, on a frequency grid in Hz, the one-sided power spectral
+densities (FS^2/Hz) of the ear noise d (``ear_psd``) and, when there is a reference,
+of the chin microphone x (``reference_psd``) and their cross spectrum
+E[D X*] (``cross_psd``). Only these second-order statistics enter the designs
+(Wiener filtering), so the same object comes from a recording with ANC off
+(``from_recording``, Welch estimates) or from the documented default
+(``default_disturbance``).
+
+Default spectrum (``default_spectrum``): motorcycle helmet noise below 1 kHz is wind
+and engine (issue 13). Wind: broadband turbulence, flat below 150 Hz and falling at
+-6 dB/octave above it (a first-order shape), with a fourth-order high-pass at 20 Hz;
+engine: lines at 90, 180, 270 and 360 Hz (a twin at 5400 rpm), each 10 dB above the wind
+at 90 Hz and 3 dB lower per harmonic, 8 Hz wide (Lorentzian; the speed wanders). With a
+feed-forward model P the chin microphone gets this spectrum and the ear gets
+|P|^2 times it plus a part not coherent with the chin (other paths, the ear's own
+flow noise) that sets the coherence to ``coherence`` (default 0.99, a 20 dB bound).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal
+
+from sysid.errors import HelmetAncError
+from sysid.model import Model
+
+__all__ = ["Disturbance", "default_spectrum", "default_disturbance", "from_recording", "synthesize"]
+
+DEFAULT_COHERENCE = 0.99
+_WIND_CORNER_HZ = 150.0
+_HIGHPASS_HZ = 20.0
+_ENGINE_HZ = 90.0
+_ENGINE_HARMONICS = 4
+_LINE_WIDTH_HZ = 8.0
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """Spectra of the noise to cancel on ``frequencies_hz`` (one-sided PSDs, FS^2/Hz)."""
+
+    frequencies_hz: np.ndarray
+    ear_psd: np.ndarray
+    reference_psd: np.ndarray | None = None
+    cross_psd: np.ndarray | None = None
+    source: dict = field(default_factory=dict)
+
+    def at(self, frequencies_hz) -> "Disturbance":
+        """The same spectra linearly interpolated onto other frequencies (Hz)."""
+        f = np.asarray(frequencies_hz, dtype=float)
+
+        def interp(values):
+            if values is None:
+                return None
+            if np.iscomplexobj(values):
+                return np.interp(f, self.frequencies_hz, values.real) + 1j * np.interp(f, self.frequencies_hz, values.imag)
+            return np.interp(f, self.frequencies_hz, values)
+
+        return Disturbance(f, interp(self.ear_psd), interp(self.reference_psd), interp(self.cross_psd), dict(self.source))
+
+    @property
+    def has_reference(self) -> bool:
+        return self.reference_psd is not None and self.cross_psd is not None
+
+    def coherent_response(self) -> np.ndarray:
+        """H = E[D X*] / E[X X*]: the reference-to-ear response the data imply (P for the default)."""
+        return self.cross_psd / np.maximum(self.reference_psd, 1e-300)
+
+    def incoherent_psd(self) -> np.ndarray:
+        """Ear PSD no causal or non-causal filter of x can remove: S_dd (1 - coherence^2)."""
+        if not self.has_reference:
+            return self.ear_psd
+        coherent = np.abs(self.cross_psd) ** 2 / np.maximum(self.reference_psd, 1e-300)
+        return np.maximum(self.ear_psd - coherent, 0.0)
+
+
+def default_spectrum(frequencies_hz) -> np.ndarray:
+    """Default wind-and-engine PSD (FS^2/Hz, about 0.05 FS RMS) at frequencies in Hz (module docstring)."""
+    f = np.asarray(frequencies_hz, dtype=float)
+    highpass = (f / _HIGHPASS_HZ) ** 4 / (1.0 + (f / _HIGHPASS_HZ) ** 4)
+    wind = highpass / (1.0 + (f / _WIND_CORNER_HZ) ** 2)
+    engine = np.zeros_like(f)
+    half = _LINE_WIDTH_HZ / 2.0
+    for h in range(1, _ENGINE_HARMONICS + 1):
+        level = 10.0 ** ((10.0 - 3.0 * (h - 1)) / 10.0) / (1.0 + (_ENGINE_HZ / _WIND_CORNER_HZ) ** 2)
+        engine += level * half**2 / ((f - h * _ENGINE_HZ) ** 2 + half**2)
+    return 2.5e-6 * (wind + engine)
+
+
+def _grid(fs: float) -> np.ndarray:
+    return np.linspace(0.0, fs / 2.0, 8193)
+
+
+def default_disturbance(fs: float, ff_model: Model | None = None, coherence: float = DEFAULT_COHERENCE) -> Disturbance:
+    """The documented default (module docstring) at sample rate fs; with ff_model, chin and ear spectra."""
+    if not 0.0 < coherence < 1.0:
+        raise HelmetAncError(f"coherence must lie strictly between 0 and 1; found {coherence}")
+    f = _grid(fs)
+    spectrum = default_spectrum(f)
+    source = {"kind": "default wind and engine spectrum", "coherence": coherence}
+    if ff_model is None:
+        return Disturbance(f, spectrum, source=source)
+    P = ff_model.frequency_response(f)
+    coherent = np.abs(P) ** 2 * spectrum
+    return Disturbance(f, coherent / coherence, spectrum, P * spectrum, source)
+
+
+def from_recording(recording, fs_expected: float | None = None, segment_s: float = 0.1) -> Disturbance:
+    """Welch spectra of a recording with ANC off: input channel = chin microphone, output = ear.
+
+    ``recording`` is a ``sysid.recordings.Recording`` (fields u = chin, y = ear, fs, path).
+    Hann segments of ``segment_s`` seconds, half overlap. The cross spectrum is E[D X*]
+    (scipy's ``csd(x, y)`` returns E[X* Y], i.e. E[Y X*] with y = ear).
+    """
+    if fs_expected is not None and recording.fs != fs_expected:
+        raise HelmetAncError(f"{recording.path}: sample rate {recording.fs:g} Hz differs from the model's "
+                             f"{fs_expected:g} Hz; record at the model's rate")
+    nperseg = int(round(segment_s * recording.fs))
+    if recording.u.size < 4 * nperseg:
+        raise HelmetAncError(f"{recording.path}: too short for a spectrum ({recording.u.size / recording.fs:.2f} s); "
+                             f"record at least {4 * segment_s:g} s with ANC off")
+    f, sxx = scipy.signal.welch(recording.u, recording.fs, nperseg=nperseg)
+    _, syy = scipy.signal.welch(recording.y, recording.fs, nperseg=nperseg)
+    _, sxy = scipy.signal.csd(recording.u, recording.y, recording.fs, nperseg=nperseg)
+    source = {"kind": "recording with ANC off", "file": str(recording.path)}
+    return Disturbance(f, syy, sxx, sxy, source)
+
+
+def _shaped_noise(psd: np.ndarray, frequencies_hz: np.ndarray, n: int, fs: float, rng: np.random.Generator) -> np.ndarray:
+    """White Gaussian noise shaped in the frequency domain to the one-sided PSD psd (FS^2/Hz)."""
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    # Unit-variance white noise has one-sided PSD 2 / fs.
+    gain = np.sqrt(np.maximum(np.interp(f, frequencies_hz, psd), 0.0) * fs / 2.0)
+    return np.fft.irfft(spectrum * gain, n)
+
+
+def synthesize(disturbance: Disturbance, n: int, fs: float, seed: int) -> tuple[np.ndarray | None, np.ndarray]:
+    """Time signals (x, u) of n samples for a simulation: x the chin reference (None without one),
+    u the ear noise not coherent with x (all of d without a reference). The caller forms
+    d = P x + u with its own (true) P. Circular shaping of seeded white noise."""
+    rng = np.random.default_rng(seed)
+    f = disturbance.frequencies_hz
+    if not disturbance.has_reference:
+        return None, _shaped_noise(disturbance.ear_psd, f, n, fs, rng)
+    x = _shaped_noise(disturbance.reference_psd, f, n, fs, rng)
+    u = _shaped_noise(disturbance.incoherent_psd(), f, n, fs, rng)
+    return x, u
