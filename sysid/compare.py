@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
 from .recordings import Recording, check_same_rate
 from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, noise_floor
@@ -91,6 +92,22 @@ class Comparison:
     per_sweep: list[dict] = field(default_factory=list)
 
     @property
+    def run_to_run(self) -> float:
+        """Run-to-run noise of ``rms`` (FS): half the difference of the two sweeps' own rms.
+
+        Each sweep's rms is one run of the same measurement; their difference over
+        sqrt(2) is the spread of one run, and ``rms`` averages two runs (a further sqrt(2)).
+        """
+        values = [s["rms"] for s in self.per_sweep if "rms" in s]
+        return abs(values[0] - values[1]) / 2.0 if len(values) == 2 else 0.0
+
+    @property
+    def excluded_fraction(self) -> float:
+        """Fraction of the sweep samples left out of validation (the model's excluded stretches)."""
+        masks = [s["excluded"] for s in self.per_sweep if "excluded" in s]
+        return float(np.mean(np.concatenate(masks))) if masks else 0.0
+
+    @property
     def ratio(self) -> float:
         """Validation rms over the noise floor (1 = as good as the data allow)."""
         return self.rms / self.noise_floor if self.noise_floor > 0 else float("inf")
@@ -129,26 +146,34 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     first = int(round(SKIP_S * fs))
     per_sweep = []
     cleaned = []
+    kept = []
     for sweep in sweeps:
+        # The model's data corrections: the ear clock resampled, excluded (clipped) stretches left out.
+        sweep = corrected(sweep, model.clock_ratio)
+        mask = excluded_mask(sweep, model.excluded)
         linear = model.simulate(sweep.u)
         residual = sweep.y - linear
         disturbance = fit_sinusoids(residual[first:], model.disturbance_frequencies, fs)
         disturbance = np.concatenate((np.zeros(first), disturbance))[: residual.size]
         predicted = linear + disturbance
-        residual = residual - disturbance
+        residual = np.where(mask, 0.0, residual - disturbance)
         per_sweep.append({"path": sweep.path, "u": sweep.u, "measured": sweep.y, "predicted": predicted,
-                          "linear": linear, "residual": residual, "fs": fs})
-        cleaned.append(Recording(sweep.u, sweep.y - disturbance, fs, sweep.path))
+                          "linear": linear, "residual": residual, "fs": fs, "excluded": mask})
+        cleaned.append(Recording(sweep.u, np.where(mask, predicted, sweep.y - disturbance), fs, sweep.path))
+        kept.append(1.0 - float(np.mean(mask[first:])))
 
     tails = [s["residual"][first:] for s in per_sweep]
     measured = [c.y[first:] for c in cleaned]
-    total = sum(t.size for t in tails)
-    energy_band = sum(band_rms(t, fs, band) ** 2 * t.size for t in tails)
-    rms = float(np.sqrt(energy_band / total))
+    total = sum(t.size * k for t, k in zip(tails, kept))
+    per_sweep_energy = [band_rms(t, fs, band) ** 2 * t.size for t in tails]
+    for record, energy, tail, k in zip(per_sweep, per_sweep_energy, tails, kept):
+        record["rms"] = float(np.sqrt(energy / (tail.size * k)))
+    rms = float(np.sqrt(sum(per_sweep_energy) / total))
     rms_full = float(np.sqrt(sum(np.sum(t**2) for t in tails) / total))
     centred = np.concatenate(measured)
     fit_percent = float(100.0 * (1.0 - np.linalg.norm(np.concatenate(tails)) / np.linalg.norm(centred - centred.mean())))
-    floor = noise_floor(cleaned[0], cleaned[1], band)
+    # The excluded samples hold no noise in the repeat difference: scale to the kept samples.
+    floor = noise_floor(cleaned[0], cleaned[1], band) / np.sqrt(max(min(kept), 1e-6))
 
     bands = _band_table(tails, cleaned, fs, first)
     lag_axis = np.arange(lags)

@@ -11,7 +11,8 @@
   input), ``input-noise`` (input noise from the repeated sweeps, H1 bias),
   ``clock-drift`` and ``time-variation`` (segments of the noise recording);
 - last, ``under-modelled``: error above the floor that no named effect explains but
-  one more mode removes.
+  one more mode removes, and in any case error above twice the floor that nothing
+  named explains (with the bands and the order it suggests).
 
 Findings are sorted significant first, then by score; on data with no missing
 effect nothing is significant. A delay and a series factor can both explain a
@@ -24,6 +25,7 @@ import time
 
 
 from .compare import compare
+from .corrections import corrected
 from .errors import IdentificationError
 from .findings import DiagnosisContext
 from .findings.data_quality import clipping_finding, dc_offset_finding
@@ -36,6 +38,7 @@ from .findings.under_modelled import under_modelled_finding
 from .findings.variation import clock_drift_finding, time_variation_finding
 from .model import Model
 from .recordings import Recording, check_same_rate
+from .thresholds import TRANSIENT_S
 
 __all__ = ["diagnose", "Diagnosis", "format_findings", "DETECTORS"]
 
@@ -60,16 +63,20 @@ class Diagnosis(list):
         return [f for f in self if f["significant"]]
 
 
-def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_s: float = 3.0,
+def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_s: float = TRANSIENT_S,
              comparison=None) -> Diagnosis:
     """Ranked findings for ``model`` on one noise recording and two repeated sweeps."""
     t0 = time.perf_counter()
     if len(sweeps) != 2:
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
+    model.check_stable()
     if noise.duration <= transient_s + 0.5:
         raise IdentificationError(f"{noise.path}: shorter than the {transient_s:g} s transient plus 0.5 s")
     comparison = comparison or compare(model, sweeps)
+    # The detectors see the recordings as the model does: the ear clock resampled by its clock_ratio.
+    noise = corrected(noise, model.clock_ratio)
+    sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
     ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
     findings = ctx.cache["findings"] = []
     for detector in DETECTORS:

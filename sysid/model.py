@@ -92,6 +92,13 @@ class Model:
     disturbance_frequencies: list[float] | None = None
     history: list[dict] = field(default_factory=list)
     identification: dict = field(default_factory=dict)
+    # Data corrections (design.md, "The model"; neutral values when absent from the JSON):
+    # output_offset (FS) is added to the ear signal; clock_ratio is ear samples per input sample,
+    # the measured ear signal is resampled by it before comparison; excluded maps a recording's
+    # file name to its stretches [start_s, stop_s] left out of identification and validation.
+    output_offset: float = 0.0
+    clock_ratio: float = 1.0
+    excluded: dict[str, list[list[float]]] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.path not in PATHS:
@@ -121,6 +128,21 @@ class Model:
             if np.any(~np.isfinite(frequencies)) or np.any(frequencies <= 0) or np.any(frequencies >= self.fs / 2):
                 raise ModelError("disturbance frequencies must lie between 0 and fs/2")
             self.disturbance_frequencies = [float(f) for f in frequencies]
+        try:
+            self.output_offset = float(self.output_offset)
+            self.clock_ratio = float(self.clock_ratio)
+        except (TypeError, ValueError):
+            raise ModelError("output_offset and clock_ratio must be numbers") from None
+        if not math.isfinite(self.output_offset):
+            raise ModelError(f"output_offset must be finite; found {self.output_offset}")
+        if not (math.isfinite(self.clock_ratio) and 0.9 < self.clock_ratio < 1.1):
+            raise ModelError(f"clock_ratio must be near 1 (ear samples per input sample); found {self.clock_ratio}")
+        if not isinstance(self.excluded, dict):
+            raise ModelError("excluded must be an object {recording: [[start_s, stop_s], ...]}")
+        try:
+            self.excluded = {str(name): [[float(a), float(b)] for a, b in spans] for name, spans in self.excluded.items()}
+        except (TypeError, ValueError):
+            raise ModelError("excluded must map each recording to [[start_s, stop_s], ...]") from None
 
     # -- properties -------------------------------------------------------------
     @property
@@ -171,7 +193,8 @@ class Model:
         v = self.apply_input_nonlinearity(u)
         if self.delay:
             v = np.concatenate((np.zeros(min(self.delay, v.size)), v[: max(v.size - self.delay, 0)]))
-        return lti.simulate(self.A, self.B, self.C, self.D, v)
+        y = lti.simulate(self.A, self.B, self.C, self.D, v)
+        return y + self.output_offset if self.output_offset else y
 
     # -- conversions ------------------------------------------------------------
     def to_statespace(self):
@@ -204,6 +227,9 @@ class Model:
             "stable": self.stable,
             "history": list(self.history),
             "identification": dict(self.identification),
+            **({"output_offset": self.output_offset} if self.output_offset else {}),
+            **({"clock_ratio": self.clock_ratio} if self.clock_ratio != 1.0 else {}),
+            **({"excluded": dict(self.excluded)} if self.excluded else {}),
         }
 
     @classmethod
@@ -241,6 +267,9 @@ class Model:
             disturbance_frequencies=disturbance,
             history=history,
             identification=identification,
+            output_offset=data.get("output_offset", 0.0),
+            clock_ratio=data.get("clock_ratio", 1.0),
+            excluded=data.get("excluded") or {},
         )
 
     def to_json(self) -> str:

@@ -18,16 +18,10 @@ from pathlib import Path
 import numpy as np
 import scipy.io.wavfile
 
+from .data_quality import clipped_samples, dc_offset
 from .errors import RecordingError
 
 __all__ = ["Recording", "RecordingWarning", "load_recording", "check_same_rate", "write_wav16", "recording_from_arrays"]
-
-# A DC offset worth reporting: a mean above this fraction of the channel's RMS and
-# above a few 16-bit LSB (3e-5 FS each).
-_DC_RELATIVE = 0.02
-_DC_ABSOLUTE = 1e-4
-# Fewer consecutive-or-not rail samples than this are taken as legitimate peaks.
-_CLIP_MIN_SAMPLES = 3
 
 
 class RecordingWarning(UserWarning):
@@ -78,34 +72,16 @@ def _check_samples(name: str, u: np.ndarray, y: np.ndarray) -> None:
         raise RecordingError(f"{name}: input channel is silent (all samples zero)")
 
 
-def _dc_offset(x: np.ndarray, segments: int = 16) -> tuple[float, bool]:
-    """A constant offset and whether it is significant.
-
-    The offset is the median of the means of ``segments`` equal parts: a real DC offset
-    shifts every part alike, while the slow response of a plant with a pole near z = 1
-    (the FB path's) moves the mean of a few parts only and is not an offset.
-    Significant when it exceeds twice the robust spread of the part means, a fraction
-    ``_DC_RELATIVE`` of the channel RMS and ``_DC_ABSOLUTE``.
-    """
-    parts = np.array([part.mean() for part in np.array_split(x, min(segments, x.size))])
-    offset = float(np.median(parts))
-    spread = 1.4826 * float(np.median(np.abs(parts - offset)))
-    rms = float(np.sqrt(np.mean((x - offset) ** 2)))
-    significant = abs(offset) > _DC_ABSOLUTE and abs(offset) > _DC_RELATIVE * rms and abs(offset) > 2 * spread
-    return offset, significant
-
-
 def _quality(name: str, u: np.ndarray, y: np.ndarray, rails: tuple[float, float]) -> tuple[tuple, tuple]:
-    low, high = rails
     clipped = []
     offsets = []
     for label, x in (("input", u), ("output", y)):
-        at_rail = int(np.count_nonzero((x <= low) | (x >= high)))
-        fraction = at_rail / x.size if at_rail >= _CLIP_MIN_SAMPLES else 0.0
+        # One clipping and one DC algorithm for loader, diagnosis and refine (sysid.data_quality).
+        fraction = clipped_samples(x, rails).fraction
         clipped.append(fraction)
         if fraction:
             warnings.warn(f"{name}: {label} channel clipped on {100 * fraction:.3g} % of samples", RecordingWarning, stacklevel=3)
-        offset, significant = _dc_offset(x)
+        offset, significant = dc_offset(x)
         offsets.append(offset if significant else 0.0)
         if significant:
             warnings.warn(f"{name}: {label} channel has a DC offset of {offset:.3g} FS", RecordingWarning, stacklevel=3)

@@ -32,16 +32,20 @@ validation error worse is flagged (``step["worse"]``) and, in ``refine_auto``, r
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
 
 from .compare import Comparison, compare, fit_sinusoids
+from .corrections import corrected, recording_key, without_excluded
 from .diagnose import diagnose
 from .effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .errors import IdentificationError
+from .findings.data_quality import clipped_stretches_of, dc_offset_finding
 from .findings.delay import scan_delay
+from .findings.variation import clock_drift_finding
 from .findings import DiagnosisContext
 from .findings.dynamics import GAIN as FACTOR_GAIN, fit_factor
 from .findings.input_noise import input_noise_density
@@ -53,12 +57,17 @@ from .model import Model
 from .output_error import block_data, refine_output_error
 from .recordings import Recording
 from .structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
+from .thresholds import AT_FLOOR, IDENTIFICATION_BAND, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT_S, WORSE
 
-__all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "refine", "refine_auto",
-           "format_refinement", "parse_refinement"]
+__all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
+           "refine", "refine_auto", "format_refinement", "parse_refinement"]
 
 # Structures ``refine --add`` can add; a parameter left at None is estimated from the data.
 REFINE_EFFECTS = {
+    # Data corrections the model carries (design.md, "The model"); estimated from the data.
+    "dc-offset": (ParameterSpec("offset_fs", None, -1.0, 1.0),),
+    "clock-drift": (ParameterSpec("ppm", None, -5000.0, 5000.0),),
+    "clipping": (),
     "delay": (ParameterSpec("samples", None, 1, 2000, "int"),),
     "input-nonlinearity": (ParameterSpec("degree", 3, 2, 3, "int"),),
     "periodic-disturbance": (ParameterSpec("frequencies_hz", None, 1.0, 22000.0, "list"),),
@@ -70,17 +79,45 @@ REFINE_EFFECTS = {
     "under-modelled": (ParameterSpec("extra_order", 2, 1, 8, "int"),),
 }
 NOT_REFINABLE = {
-    "dc-offset": "a DC offset is removed by the pipeline already; fix it at the preamplifier",
-    "clipping": "clipped samples cannot be modelled; re-record with less gain",
     "time-variation": "a path that changes while recording has no single model; identify per condition",
-    "clock-drift": "clock drift is fixed by recording from one clock or resampling, not by the model",
 }
 # The re-identification's grid: the seed's orders, gamma step 30 (as the test sessions use).
 REFIT_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)), refine_seconds=5.0)
-# A refinement that raises the validation rms by more than this is called worse.
-WORSE = 1.02
-# Validation rms at most this many times the noise floor counts as at the floor.
-AT_FLOOR = 1.2
+
+
+@dataclass
+class RefinementStep:
+    """One step of refinement as recorded in a model's ``history`` (rms values in FS).
+
+    ``worse``: the validation rms rose by more than ``WORSE``; ``accepted``: whether
+    ``refine_auto`` kept the step (None outside ``refine_auto``); ``note``: why not.
+    """
+
+    effect: str
+    params: dict
+    rms_before: float
+    rms_after: float
+    noise_floor_before: float
+    noise_floor_after: float
+    order_before: int
+    order_after: int
+    worse: bool = False
+    accepted: bool | None = None
+    score: float | None = None
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-safe dict (the entry of a model's ``history``)."""
+        data = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        return {k: v for k, v in data.items() if v is not None and v != ""}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "RefinementStep":
+        known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
+        known.setdefault("params", {})
+        for name in ("rms_before", "rms_after", "noise_floor_before", "noise_floor_after", "order_before", "order_after"):
+            known.setdefault(name, float("nan"))
+        return cls(**known)
 
 
 @dataclass
@@ -88,7 +125,7 @@ class Refinement:
     """One refinement: the new model, its history entry, and the comparisons before and after."""
 
     model: Model
-    step: dict
+    step: RefinementStep
     before: Comparison
     after: Comparison
 
@@ -112,9 +149,17 @@ def _disturbance(model: Model, recording: Recording, frequencies) -> np.ndarray:
     return fit_sinusoids(recording.y - model.simulate(recording.u), frequencies, recording.fs)
 
 
+def _prepared(model: Model, recording: Recording) -> Recording:
+    """A recording with the model's data corrections: ear clock resampled, excluded stretches cut out."""
+    return without_excluded(corrected(recording, model.clock_ratio), model.excluded)
+
+
 def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
-    """Recordings as the LTI core sees them: mapped input, ear signal without the disturbance."""
-    return [Recording(input_map(r.u), r.y - _disturbance(model, r, frequencies), r.fs, r.path) for r in recordings]
+    """Recordings as the LTI core sees them: data corrections applied, mapped input, ear signal
+    without the disturbance and the output offset."""
+    prepared = [_prepared(model, r) for r in recordings]
+    return [Recording(input_map(r.u), r.y - model.output_offset - _disturbance(model, r, frequencies), r.fs, r.path)
+            for r in prepared]
 
 
 def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s, extra_order: int = 2) -> Model:
@@ -131,7 +176,8 @@ def _with(model: Model, core, **changes) -> Model:
     A, B, C, D = core
     fields = dict(path=model.path, fs=model.fs, A=A, B=B, C=C, D=D, delay=model.delay,
                   input_nonlinearity=model.input_nonlinearity, disturbance_frequencies=model.disturbance_frequencies,
-                  history=list(model.history), identification=dict(model.identification))
+                  history=list(model.history), identification=dict(model.identification),
+                  output_offset=model.output_offset, clock_ratio=model.clock_ratio, excluded=dict(model.excluded))
     fields.update(changes)
     return Model(**fields)
 
@@ -161,7 +207,7 @@ def _delay(model, noise, sweeps, params, options, transient_s):
 def _nonlinearity(model, noise, sweeps, params, options, transient_s):
     # a2, a3 from the sweep residual through the current linear part (the diagnosis's
     # estimator), relative to the model's own polynomial; then the core on v = poly(u).
-    ctx = DiagnosisContext(model, noise, sweeps, compare(model, sweeps), transient_s)
+    ctx = _context(model, noise, sweeps, compare(model, sweeps), transient_s)
     found = nonlinearity_finding(ctx)["params"]
     previous = model.input_nonlinearity or [1.0]
     added = [0.0, found["a2"], found["a3"] if params["degree"] >= 3 else 0.0]
@@ -177,8 +223,17 @@ def _periodic(model, noise, sweeps, params, options, transient_s):
     frequencies = sorted(set((model.disturbance_frequencies or []) + list(params["frequencies_hz"])))
     core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
                        frequencies, options, transient_s)
-    return (_with(model, _core(core), disturbance_frequencies=frequencies, identification=dict(core.identification)),
-            {"frequencies_hz": frequencies})
+    refit = _with(model, _core(core), disturbance_frequencies=frequencies, identification=dict(core.identification))
+    return _better(sweeps, _with(model, _core(model), disturbance_frequencies=frequencies), refit), \
+        {"frequencies_hz": frequencies}
+
+
+def _better(sweeps, kept: Model, refit: Model) -> Model:
+    """Of the model with the core kept as it is and the re-identified one, the stable one with the lower
+    validation rms: a correction or disturbance model that keeps the core can only lower the error, so
+    the step never makes the model worse than the structure alone does."""
+    trials = [m for m in (kept, refit) if m.stable] or [kept]
+    return min(trials, key=lambda m: compare(m, sweeps).rms)
 
 
 def _order(model, noise, sweeps, params, options, transient_s):
@@ -204,9 +259,10 @@ def _grown(model, data, blocks) -> Model:
 
 
 def _output_error_data(model, noise, transient_s, seconds):
-    body = noise.trimmed(transient_s)
-    y = body.y - _disturbance(model, body, model.disturbance_frequencies)
-    return block_data(Recording(model.apply_input_nonlinearity(body.u), y, body.fs, body.path), (20.0, 5000.0), seconds)
+    body = _prepared(model, noise).trimmed(transient_s)
+    y = body.y - model.output_offset - _disturbance(model, body, model.disturbance_frequencies)
+    return block_data(Recording(model.apply_input_nonlinearity(body.u), y, body.fs, body.path), IDENTIFICATION_BAND,
+                      seconds)
 
 
 def _factor(kind):
@@ -256,15 +312,58 @@ def _input_noise(model, noise, sweeps, params, options, transient_s):
     return refined, {"input_noise_density": density}
 
 
-_BUILDERS = {"delay": _delay, "input-nonlinearity": _nonlinearity, "periodic-disturbance": _periodic,
+def _plain_input(model):
+    return lambda u: _shift(model.apply_input_nonlinearity(u), model.delay)
+
+
+def _dc_offset(model, noise, sweeps, params, options, transient_s):
+    # The offset is no part of the dynamics: the core stays, the prediction gains a constant.
+    return _with(model, _core(model), output_offset=model.output_offset + params["offset_fs"]), {}
+
+
+def _clock_drift(model, noise, sweeps, params, options, transient_s):
+    # The ear channel resampled by the ratio (composed with any ratio the model has), the core
+    # re-identified on the corrected recordings.
+    ratio = model.clock_ratio * (1.0 + params["ppm"] * 1e-6)
+    trial = _with(model, _core(model), clock_ratio=ratio)
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
+    refit = _with(trial, _core(core), identification=dict(core.identification))
+    return _better(sweeps, trial, refit), {"clock_ratio": ratio}
+
+
+def _clipping(model, noise, sweeps, params, options, transient_s):
+    # Clipped stretches (either channel, any level, with margins) left out of identification and
+    # validation; the core re-identified on what is left.
+    excluded = dict(model.excluded)
+    fractions = []
+    for recording in (noise, *sweeps):
+        spans, _ = clipped_stretches_of(corrected(recording, model.clock_ratio))
+        if spans:
+            excluded[recording_key(recording)] = spans
+        fractions.append(sum(b - a for a, b in spans) / recording.duration)
+    if not excluded:
+        raise IdentificationError("--add clipping: no recording clips")
+    trial = _with(model, _core(model), excluded=excluded)
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
+    refit = _with(trial, _core(core), identification=dict(core.identification))
+    return _better(sweeps, trial, refit), {"excluded_fraction": [round(f, 6) for f in fractions]}
+
+
+_BUILDERS = {"dc-offset": _dc_offset, "clock-drift": _clock_drift, "clipping": _clipping,"delay": _delay, "input-nonlinearity": _nonlinearity, "periodic-disturbance": _periodic,
              "highpass": _factor("highpass"), "lowpass": _factor("lowpass"), "resonance": _factor("resonance"),
              "input-noise": _input_noise, "under-modelled": _order}
+
+
+def _context(model, noise, sweeps, comparison, transient_s) -> DiagnosisContext:
+    """What the detectors see: the recordings with the model's clock correction."""
+    return DiagnosisContext(model, corrected(noise, model.clock_ratio), [corrected(s, model.clock_ratio) for s in sweeps],
+                            comparison, transient_s)
 
 
 def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> dict:
     """Fill parameters left at None from the data (the same estimators as ``diagnose``)."""
     params = dict(spec.params)
-    ctx = DiagnosisContext(model, noise, sweeps, before, transient_s)
+    ctx = _context(model, noise, sweeps, before, transient_s)
     if spec.kind == "delay" and params["samples"] is None:
         best, _ = scan_delay(ctx)
         if best <= model.delay:
@@ -276,6 +375,13 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
             raise IdentificationError("--add periodic-disturbance: no line found in the residual; "
                                       "give periodic-disturbance:frequencies_hz=F1/F2")
         params["frequencies_hz"] = tuple(found)
+    if spec.kind == "dc-offset" and params["offset_fs"] is None:
+        params["offset_fs"] = dc_offset_finding(ctx)["params"]["ear_offset_fs"]
+    if spec.kind == "clock-drift" and params["ppm"] is None:
+        found = clock_drift_finding(ctx)
+        if not found["significant"]:
+            raise IdentificationError("--add clock-drift: the noise recording shows no clock drift; give clock-drift:PPM")
+        params["ppm"] = found["params"]["ppm"]
     if spec.kind == "input-noise" and params["input_noise_density"] is None:
         params["input_noise_density"] = input_noise_density(sweeps)
     estimate = {"resonance": "f0_hz", "highpass": "corner_hz", "lowpass": "corner_hz"}.get(spec.kind)
@@ -296,7 +402,7 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
 
 
 def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
-           transient_s: float = 3.0, before: Comparison | None = None) -> Refinement:
+           transient_s: float = TRANSIENT_S, before: Comparison | None = None) -> Refinement:
     """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify."""
     spec = effect if isinstance(effect, EffectSpec) else parse_refinement(effect)
     if spec.kind not in _BUILDERS:
@@ -308,12 +414,10 @@ def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, opti
         raise IdentificationError(f"refining with {spec.kind} gave an unstable model (pole radius "
                                   f"{refined.spectral_radius:.6f}); the model is left unchanged")
     after = compare(refined, sweeps)
-    worse = after.rms > WORSE * before.rms
-    step = {"effect": spec.kind, "params": {**{k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}, **extra},
-            "rms_before": before.rms, "rms_after": after.rms, "noise_floor_before": before.noise_floor,
-            "noise_floor_after": after.noise_floor, "order_before": model.order, "order_after": refined.order,
-            "worse": bool(worse)}
-    refined.history = list(model.history) + [step]
+    step = RefinementStep(spec.kind, {**{k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}, **extra},
+                          before.rms, after.rms, before.noise_floor, after.noise_floor, model.order, refined.order,
+                          worse=bool(after.rms > WORSE * before.rms))
+    refined.history = list(model.history) + [step.to_dict()]
     refined.identification.update({"rms": after.rms, "noise_floor": after.noise_floor, "order": refined.order})
     return Refinement(refined, step, before, after)
 
@@ -327,78 +431,137 @@ def _auto_spec(found: dict) -> EffectSpec:
               "resonance": lambda: {"f0_hz": p["f0_hz"], "q": p["q"], "gain_db": p["gain_db"]},
               "highpass": lambda: {"corner_hz": p["corner_hz"], "order": p["order"]},
               "lowpass": lambda: {"corner_hz": p["corner_hz"], "order": p["order"]},
-              "under-modelled": lambda: {"extra_order": 2}}[found["effect"]]()
+              "under-modelled": lambda: {"extra_order": 2},
+              "dc-offset": lambda: {"offset_fs": p["ear_offset_fs"]},
+              "clock-drift": lambda: {"ppm": p["ppm"]},
+              "clipping": lambda: {}}[found["effect"]]()
     return EffectSpec(found["effect"], params)
 
 
-AUTO_EFFECTS = ("delay", "input-nonlinearity", "periodic-disturbance", "input-noise", "resonance", "highpass", "lowpass",
-                "under-modelled")
+AUTO_EFFECTS = ("clipping", "clock-drift", "dc-offset", "delay", "input-nonlinearity", "periodic-disturbance",
+                "input-noise", "resonance", "highpass", "lowpass", "under-modelled")
+# Data corrections go first, then the disturbance (what is not the plant): every later estimate
+# is better on corrected data. They may still lower the error at the floor: the disturbance
+# inflates the noise floor itself.
+_CORRECTIONS = ("clipping", "clock-drift", "dc-offset", "periodic-disturbance")
+# Corrections judged on the full-band rms (what they change lies outside the validation band).
+_OUT_OF_BAND = ("dc-offset",)
+
+
+@dataclass
+class AutoRefinement:
+    """What ``refine_auto`` did: the final model, every step tried (kept or not) and why it stopped."""
+
+    model: Model
+    steps: list[RefinementStep]
+    stop_reason: str
+    before: Comparison
+    after: Comparison
+
+
+def _step_key(spec: EffectSpec) -> str:
+    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()}}, sort_keys=True)
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
-                max_steps: int = 5, transient_s: float = 3.0) -> tuple[Model, list[dict]]:
-    """Diagnose -> add the top significant model structure -> refit, until nothing is left.
+                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S) -> AutoRefinement:
+    """Diagnose -> add the top significant structure or correction -> refit, monotone and bounded.
 
-    Stops when no significant finding names a structure (data-quality findings,
-    time variation and clock drift are reported by ``diagnose`` but are not fixed
-    here), or after ``max_steps``. A step that makes the validation error worse is
-    recorded with ``accepted: False`` and its effect is not tried again until another
-    step has been accepted.
+    A step is kept only if it lowers the validation rms by more than the run-to-run
+    noise of that figure (``Comparison.run_to_run``, from the two sweeps; at least
+    ``RUN_TO_RUN_MIN`` of it). An effect whose step is not kept (or fails) stays
+    rejected, no step (effect and parameters) is tried twice, and there are at most
+    ``max_steps`` steps. ``stop_reason`` says why it stopped: "at the floor",
+    "nothing left that lowers the error", "effects that cannot be modelled: ...".
     """
-    steps: list[dict] = []
+    start = current = compare(model, sweeps)
+    steps: list[RefinementStep] = []
     rejected: set[str] = set()
-    for _ in range(max_steps):
-        diagnosis = diagnose(model, noise, sweeps, transient_s)
+    tried: set[str] = set()
+    stop_reason = f"step limit ({max_steps} steps)"
+    while len(steps) < max_steps:
+        at_floor = current.ratio <= AT_FLOOR
+        diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
+        unmodellable = [f["effect"] for f in diagnosis.significant if f["effect"] not in AUTO_EFFECTS]
         candidates = [f for f in diagnosis.significant if f["effect"] in AUTO_EFFECTS and f["effect"] not in rejected]
+        if at_floor:
+            # At the floor in band; only a data correction (an offset at DC) can still lower the error.
+            candidates = [f for f in candidates if f["effect"] in _CORRECTIONS]
+            if not candidates:
+                stop_reason = "at the floor"
+                break
         # The estimator choice is made once; the data keep showing input noise afterwards.
-        if any(step["effect"] == "input-noise" for step in model.history):
+        if any(step.get("effect") == "input-noise" for step in model.history):
             candidates = [f for f in candidates if f["effect"] != "input-noise"]
-        if not candidates:
+        candidates.sort(key=lambda f: f["effect"] not in _CORRECTIONS)
+        specs = [(f, _auto_spec(f)) for f in candidates]
+        specs = [(f, spec) for f, spec in specs if _step_key(spec) not in tried]
+        if not specs:
+            stop_reason = ("effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
+                           else "nothing left that lowers the error")
             break
-        spec = _auto_spec(candidates[0])
+        found, spec = specs[0]
+        tried.add(_step_key(spec))
+        needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
-            result = refine(model, noise, sweeps, spec, options, transient_s, diagnosis.comparison)
+            result = refine(model, noise, sweeps, spec, options, transient_s, current)
         except IdentificationError as exc:
             # An unstable or failed refit is reported as a rejected step, never returned.
-            c = diagnosis.comparison
-            steps.append({"effect": spec.kind, "params": dict(spec.params), "rms_before": c.rms, "rms_after": c.rms,
-                          "noise_floor_before": c.noise_floor, "noise_floor_after": c.noise_floor,
-                          "order_before": model.order, "order_after": model.order, "worse": False,
-                          "accepted": False, "note": str(exc), "score": candidates[0]["score"]})
+            steps.append(RefinementStep(spec.kind, dict(spec.params), current.rms, current.rms, current.noise_floor,
+                                        current.noise_floor, model.order, model.order, accepted=False,
+                                        score=found["score"], note=str(exc)))
             rejected.add(spec.kind)
             continue
-        step = dict(result.step, accepted=not result.step["worse"], score=candidates[0]["score"])
+        step = result.step
+        step.score = found["score"]
+        step.accepted = result.after.rms < current.rms - needed
+        if spec.kind in _OUT_OF_BAND:
+            # An offset lives at DC, outside the validation band: it must lower the full-band rms
+            # and leave the in-band rms within its run-to-run noise.
+            step.accepted = (result.after.rms_full < (1.0 - RUN_TO_RUN_MIN) * current.rms_full
+                             and result.after.rms <= current.rms + needed)
+        if not step.accepted:
+            step.note = (f"lowered the rms by {current.rms - result.after.rms:.2e} FS, not more than the run-to-run "
+                         f"noise {needed:.2e} FS" if result.after.rms < current.rms else "validation error rose")
+            rejected.add(spec.kind)
         steps.append(step)
-        if step["accepted"]:
+        if step.accepted:
             model = result.model
-            model.history[-1] = step
-            # A structure that did not pay before this step may pay now (hum after the delay).
-            rejected.clear()
-        else:
-            rejected.add(step["effect"])
-    return model, steps
+            model.history[-1] = step.to_dict()
+            current = result.after
+    else:
+        if current.ratio <= AT_FLOOR:
+            stop_reason = "at the floor"
+    return AutoRefinement(model, steps, stop_reason, start, current)
 
 
-def format_refinement(steps: list[dict]) -> str:
-    """One line per step: effect, parameters, rms before -> after, in multiples of the noise floor."""
-    if not steps:
-        return "no refinement: nothing significant to add"
-    lines = []
+def format_refinement(steps, stop_reason: str | None = None) -> str:
+    """One line per step: effect, parameters, rms before -> after, in multiples of the noise floor.
+
+    ``steps`` are ``RefinementStep`` records or their dicts (a model's ``history``).
+    """
+    steps = [s if isinstance(s, RefinementStep) else RefinementStep.from_dict(s) for s in steps]
+    lines = [] if steps else ["no refinement step"]
     for k, step in enumerate(steps, start=1):
-        params = ", ".join(f"{name} {_brief(value)}" for name, value in step["params"].items())
-        verdict = "" if step.get("accepted", not step.get("worse")) else f"  (rejected: {step.get('note', 'validation error rose')})"
-        if step.get("worse") and "accepted" not in step:
+        params = ", ".join(f"{name} {_brief(value)}" for name, value in step.params.items())
+        if step.accepted is False:
+            verdict = f"  (rejected: {step.note or 'validation error rose'})"
+        elif step.worse and step.accepted is None:
             verdict = "  (WARNING: validation error rose)"
-        lines.append(f"{k}. + {step['effect']} ({params}): rms {step['rms_before']:.3e} -> {step['rms_after']:.3e} FS "
-                     f"({step['rms_before'] / step['noise_floor_before']:.2f}x -> "
-                     f"{step['rms_after'] / step['noise_floor_after']:.2f}x noise floor), "
-                     f"order {step['order_before']} -> {step['order_after']}{verdict}")
+        else:
+            verdict = ""
+        lines.append(f"{k}. + {step.effect} ({params}): rms {step.rms_before:.3e} -> {step.rms_after:.3e} FS "
+                     f"({step.rms_before / step.noise_floor_before:.2f}x -> "
+                     f"{step.rms_after / step.noise_floor_after:.2f}x noise floor), "
+                     f"order {step.order_before} -> {step.order_after}{verdict}")
+    if stop_reason:
+        lines.append(f"stopped: {stop_reason}")
     return "\n".join(lines)
 
 
 def _brief(value) -> str:
     if isinstance(value, float):
-        return f"{value:.4g}"
+        return f"{value:.6g}"
     if isinstance(value, (list, tuple)):
         return "/".join(_brief(v) for v in value[:8]) + ("/..." if len(value) > 8 else "")
     return str(value)

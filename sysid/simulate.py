@@ -18,6 +18,7 @@ import numpy as np
 import scipy.interpolate
 import scipy.signal
 
+from .data_quality import clipped_samples
 from .effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .errors import HelmetAncError
 from .model import Model, atomic_write_text
@@ -45,11 +46,12 @@ SIMULATED_EFFECTS = {
     # Input-channel SNR (dB) inside the noise excitation's band; the noise itself is white.
     "input-noise": (ParameterSpec("snr_db", 10.0, -20.0, 80.0),),
     "dc-offset": (ParameterSpec("level", 0.01, -0.5, 0.5), ParameterSpec("channel", 1, 0, 1, "int")),
-    # Clean ear-signal peak relative to full scale; the 16-bit converter clips above 1.
-    "clipping": (ParameterSpec("peak", 1.3, 1.0, 8.0),),
+    # Clean ear-signal peak relative to the clip level; a preamplifier flat-tops at level (FS),
+    # the 16-bit converter at 1.
+    "clipping": (ParameterSpec("peak", 1.3, 1.0, 8.0), ParameterSpec("level", 1.0, 0.01, 1.0)),
     # Gain change below corner_hz from the start to the end of the session (a changing leak).
     "time-variation": (ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0)),
-    # Ear-channel clock error relative to the input channel (parts per million).
+    # Ear-channel clock error relative to the input channel (parts per million; positive = ear clock fast).
     "clock-drift": (ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
 }
 
@@ -184,9 +186,7 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
 
 def _recording(u: np.ndarray, y: np.ndarray, fs: float, name: str) -> Recording:
     """A Recording with the data-quality fields a loaded file would have."""
-    rails = (-1.0, 32767 / 32768.0)
-    clipped = tuple(float(np.count_nonzero((x <= rails[0]) | (x >= rails[1])) / x.size) for x in (u, y))
-    clipped = tuple(c if c * u.size >= 3 else 0.0 for c in clipped)
+    clipped = tuple(clipped_samples(x).fraction for x in (u, y))
     return Recording(u, y, fs, name, clipped, (0.0, 0.0))
 
 
@@ -235,7 +235,8 @@ def _effect_records(hidden: dict[str, dict], spec: SessionSpec, noise_gain: floa
     if "input-noise" in hidden:
         records["input-noise"] = {"input_noise_rms": _input_noise_rms(hidden, spec, noise_gain)}
     if "clipping" in hidden:
-        records["clipping"] = {"ear_gain": float(hidden["clipping"]["peak"] / ear_peak)}
+        p = hidden["clipping"]
+        records["clipping"] = {"ear_gain": float(p["peak"] * p["level"] / ear_peak), "level": float(p["level"])}
     return records
 
 
@@ -257,10 +258,11 @@ def _dc(hidden: dict[str, dict], channel: int) -> float:
 def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng) -> np.ndarray:
     """The ear signal of one recording (n samples from session sample ``start``) with the output-side effects."""
     if "clock-drift" in hidden:
-        # The ear channel's clock runs (1 + ppm 1e-6) fast: sample k is taken at k (1 + eps).
+        # The ear channel's clock runs ppm fast: it takes 1 + eps samples per input sample, so its
+        # sample k is taken at input time k / (1 + eps) (a slow clock, ppm < 0, reads past the end).
         eps = hidden["clock-drift"]["ppm"] * 1e-6
         spline = scipy.interpolate.CubicSpline(np.arange(y_long.size), y_long)
-        y = spline(np.arange(n) * (1.0 + eps))
+        y = spline(np.arange(n) / (1.0 + eps))
     else:
         y = y_long[:n].copy()
     if "time-variation" in hidden:
@@ -272,6 +274,9 @@ def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng) ->
         y = y + ramp * low
     if "clipping" in hidden:
         y = y * records["clipping"]["ear_gain"]
+        level = records["clipping"]["level"]
+        if level < 1.0:
+            y = np.clip(y, -level, level)
     if "periodic-disturbance" in hidden:
         t = np.arange(n) / fs
         lines = records["periodic-disturbance"]

@@ -71,18 +71,21 @@ def test_input_noise_refinement_removes_the_gain_bias():
 
 def test_auto_finds_and_fixes_delay_and_hum_together():
     session, model = effect_case("ff", 6, ("delay:23", "periodic-disturbance:50,2,1e-3"))
-    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
-    assert {s["effect"] for s in steps if s["accepted"]} == {"delay", "periodic-disturbance"}
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    final, steps = auto.model, auto.steps
+    assert {s.effect for s in steps if s.accepted} == {"delay", "periodic-disturbance"}
     assert compare(final, session.sweeps).ratio <= 1.2
-    assert [h["effect"] for h in final.history] == [s["effect"] for s in steps if s["accepted"]]
-    assert "noise floor" in format_refinement(steps)
+    assert [h["effect"] for h in final.history] == [s.effect for s in steps if s.accepted]
+    assert auto.stop_reason == "at the floor"
+    assert "stopped: at the floor" in format_refinement(steps, auto.stop_reason)
 
 
 def auto_fixes_factor(kind, path, seed):
     spec, _ = random_factor(kind, np.random.default_rng(seed))
     session, model = reference_case(path, seed, (spec,))
-    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
-    assert [s["effect"] for s in steps if s["accepted"]] == [kind], (spec, format_refinement(steps))
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    final, steps = auto.model, auto.steps
+    assert [s.effect for s in steps if s.accepted] == [kind], (spec, format_refinement(steps))
     assert compare(final, session.sweeps).ratio <= 1.2, (spec, format_refinement(steps))
     assert final.stable and final.history[-1]["effect"] == kind
     return final
@@ -112,14 +115,16 @@ def test_more_order_fixes_an_under_modelled_model():
 
 def test_auto_on_a_clean_session_changes_nothing():
     session, model = effect_case("ff", 3, ())
-    final, steps = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
-    assert steps == [] and final is model
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    assert auto.steps == [] and auto.model is model
+    assert auto.stop_reason == "at the floor"
 
 
 @pytest.mark.parametrize("spec, message", [
     ("wobble", "unknown effect 'wobble'"),
     ("delay:x", "'x' is not a number"),
-    ("clipping", "clipping is not a model structure"),
+    ("time-variation", "time-variation is not a model structure"),
+    ("clipping", "no recording clips"),
     ("resonance", "the sweeps show no resonance"),
     ("highpass:order=2", "the sweeps show no highpass"),
 ])

@@ -53,9 +53,10 @@ def _refinement_loop(model, outdir: Path, seed: int):
     print(f"\ndiagnose: the FF model on a re-measured session ({outdir}/ff-remeasured/, hidden effects kept "
           f"in truth.json): rms {before.rms:.3e} FS = {before.rms / before.noise_floor:.1f}x the noise floor")
     print(format_findings(diagnose(model, session.noise, session.sweeps, comparison=before)))
-    refined, steps = refine_auto(model, session.noise, session.sweeps)
+    auto = refine_auto(model, session.noise, session.sweeps)
+    refined = auto.model
     print("refine --auto:")
-    print(format_refinement(steps))
+    print(format_refinement(auto.steps, auto.stop_reason))
     refined.save(outdir / "ff_refined_model.json")
     print(f"refined model written to {outdir}/ff_refined_model.json")
     return refined, session

@@ -34,19 +34,21 @@ def run(args) -> int:
     model = Model.load(args.model)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
+    stop_reason = None
     if args.auto:
-        model, steps = refine_auto(model, noise, sweeps)
+        auto = refine_auto(model, noise, sweeps)
+        model, steps, stop_reason = auto.model, auto.steps, auto.stop_reason
     else:
         steps = []
         for spec in specs:
             result = refine(model, noise, sweeps, spec)
             steps.append(result.step)
             model = result.model
-            if result.step["worse"]:
+            if result.step.worse:
                 sys.stderr.write(f"helmet-anc refine: warning: adding {spec.kind} raised the validation rms from "
-                                 f"{result.step['rms_before']:.3e} to {result.step['rms_after']:.3e} FS\n")
+                                 f"{result.step.rms_before:.3e} to {result.step.rms_after:.3e} FS\n")
     model.save(output)
-    print(format_refinement(steps))
+    print(format_refinement(steps, stop_reason))
     print(f"wrote {output}")
     if report_target:
         from sysid.report import write_report

@@ -1,28 +1,31 @@
 """Data-quality findings straight from the recordings: DC offset and clipping (effects.md).
 
-Neither is a property of the sound path, so neither is refined into the model:
-the pipeline already removes block means (and validates in band, which excludes
-DC), and clipped stretches cannot be modelled by a linear path; the remedy is on
-the recording side.
+Neither is a property of the sound path; ``refine`` corrects for both: a DC offset
+on the ear signal becomes the model's ``output_offset``, and clipped stretches
+(at any level, either channel) are listed in the model's ``excluded`` and left out
+of identification and validation. The better remedy is on the recording side.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..corrections import recording_key
+from ..data_quality import DC_ABSOLUTE, clipped_samples, clipped_stretches, dc_offset
+from ..recordings import Recording
+from ..validation import SKIP_S
 from . import DiagnosisContext, finding
 
-__all__ = ["dc_offset_finding", "clipping_finding"]
+__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of"]
 
-# As in sysid.recordings: a mean above 2 % of the channel's RMS and above a few LSB.
-DC_RELATIVE = 0.02
-DC_ABSOLUTE = 1e-4
-# 16-bit rails in full-scale units; fewer rail samples than this are legitimate peaks.
-RAILS = (-1.0, 32767 / 32768.0)
-CLIP_MIN_SAMPLES = 3
-# The first 20 ms of a sweep recording count as silence when the input there is 40 dB down.
-LEAD_S = 0.02
-SILENT = 0.01
+# The ear offset is read in up to the first LEAD_S of a sweep recording where the input is SILENT
+# (relative to its peak) or less.
+LEAD_S = 0.5
+SILENT = 1e-3
+# Margins around a clipped run left out of identification and validation: an ear sample that
+# clipped spoils itself only; a clipped input misleads the model for its impulse response.
+EAR_MARGIN_S = 0.002
+INPUT_MARGIN_S = 0.02
 
 
 def _recordings(ctx: DiagnosisContext):
@@ -30,52 +33,87 @@ def _recordings(ctx: DiagnosisContext):
 
 
 def dc_offset_finding(ctx: DiagnosisContext) -> dict:
-    """Means of the input channels, and of the ear channels where the input is silent.
+    """Offsets of the input channels, and of the ear channel against the model's prediction.
 
-    The noise excitation is zero-mean, so an input mean is an offset. An ear signal
-    may have a genuine mean (a path with large DC gain driven by a finite sweep), so
-    the ear offset is read in the silence before a sweep (``LEAD_S``), where the path
-    is at rest; sweeps without such silence are not used for it.
+    The noise excitation and the sweeps are zero-mean, so an input mean is an offset
+    (``sysid.data_quality.dc_offset``). An ear signal may have a genuine mean (a path
+    with large DC gain, a model that lacks a high-pass), so the ear offset is read
+    where the path is at rest: the silence before each sweep, where the input is
+    ``SILENT`` of its RMS or less; the model's prediction there (its ``output_offset``)
+    is subtracted, so what is left is the offset the model misses. It counts when the
+    sweeps agree on it and it exceeds ``DC_ABSOLUTE`` and 6 standard errors of the mean.
     """
-    worst, where, level = 0.0, "", 0.0
-    offsets = {}
     body = ctx.body
-    channels = [(body.path, "input", float(np.mean(body.u)), float(np.std(body.u)))]
-    channels += [(s.path, "input", float(np.mean(s.u)), float(np.std(s.u))) for s in ctx.sweeps]
-    lead = int(round(LEAD_S * ctx.fs))
-    for s in ctx.sweeps:
-        if np.sqrt(np.mean(s.u[:lead] ** 2)) < SILENT * np.std(s.u):
-            channels.append((s.path, "ear", float(np.mean(s.y[:lead])), float(np.std(s.y))))
-    for path, label, mean, spread in channels:
-        relative = abs(mean) / max(DC_RELATIVE * spread, DC_ABSOLUTE)
-        offsets[f"{path}:{label}"] = mean
-        if relative > worst:
-            worst, where, level = relative, f"{label} channel of {path}", mean
-    significant = worst >= 1.0
-    explanation = (f"the {where} has a mean of {level:.3g} FS: a preamplifier offset or microphone bias; "
-                   "the identification removes block means and validates in band, so the model is not affected"
-                   if significant else "no channel has a DC offset above 2 % of its RMS")
-    return finding("dc-offset", significant, worst, {"offset_fs": level, "channel": where}, explanation,
-                   "remove the offset at the source (AC-couple the preamplifier); no model change is needed",
-                   {"means_fs": [round(v, 8) for v in offsets.values()]})
+    channels = [(body.path, "input", *dc_offset(body.u))]
+    channels += [(s.path, "input", *dc_offset(s.u)) for s in ctx.sweeps]
+    leads = []
+    for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
+        loud = np.flatnonzero(np.abs(sweep.u) > SILENT * np.max(np.abs(sweep.u)))
+        lead = min(int(loud[0]) if loud.size else 0, int(round(LEAD_S * ctx.fs)))
+        if lead >= 64:
+            residual = sweep.y[:lead] - record["predicted"][:lead]
+            leads.append((float(np.mean(residual)), float(np.std(residual)) / np.sqrt(lead)))
+    ear_offset, ear_significant = 0.0, False
+    if leads:
+        means = np.array([m for m, _ in leads])
+        error = float(np.sqrt(np.mean([e**2 for _, e in leads]) / len(leads)))
+        ear_offset = float(np.mean(means))
+        agree = np.ptp(means) <= max(6 * error * np.sqrt(2), 0.1 * abs(ear_offset))
+        ear_significant = bool(abs(ear_offset) > max(DC_ABSOLUTE, 6 * error) and agree)
+        channels.append(("the sweeps' leading silence", "ear", ear_offset, ear_significant))
+    significant = [c for c in channels if c[3]]
+    worst = max(channels, key=lambda c: (c[3], abs(c[2])))
+    where, level = f"{worst[1]} channel of {worst[0]}", worst[2]
+    score = abs(level) / DC_ABSOLUTE
+    explanation = (f"the {where} has a mean of {level:.3g} FS the model does not predict: a preamplifier offset or "
+                   "microphone bias" if significant else "no channel has a DC offset the model misses")
+    remedy = ("refine --add dc-offset (the model's output_offset takes the ear offset in); better, AC-couple the "
+              "preamplifier" if significant else "none")
+    return finding("dc-offset", bool(significant), max(score, 1.0) if significant else min(score, 0.99),
+                   {"offset_fs": level, "ear_offset_fs": ear_offset if ear_significant else 0.0, "channel": where},
+                   explanation, remedy, {"means_fs": [round(c[2], 8) for c in channels]})
+
+
+def clipped_stretches_of(recording: Recording) -> tuple[list[list[float]], float]:
+    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction."""
+    spans, fraction = [], 0.0
+    for x, margin in ((recording.u, INPUT_MARGIN_S), (recording.y, EAR_MARGIN_S)):
+        clipping = clipped_samples(x)
+        fraction = max(fraction, clipping.fraction)
+        spans += clipped_stretches(clipping.mask, recording.fs, margin)
+    mask = np.zeros(recording.u.size, bool)
+    for start, stop in spans:
+        mask[int(round(start * recording.fs)):int(round(stop * recording.fs))] = True
+    return clipped_stretches(mask, recording.fs, 0.0), fraction
 
 
 def clipping_finding(ctx: DiagnosisContext) -> dict:
-    worst, where = 0.0, ""
-    fractions = {}
+    """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``)."""
+    worst, where, levels = 0.0, "", []
+    fractions, excluded = {}, {}
     for recording in _recordings(ctx):
         for label, x in (("input", recording.u), ("ear", recording.y)):
-            count = int(np.count_nonzero((x <= RAILS[0]) | (x >= RAILS[1])))
-            fraction = count / x.size if count >= CLIP_MIN_SAMPLES else 0.0
-            fractions[f"{recording.path}:{label}"] = fraction
-            if fraction > worst:
-                worst, where = fraction, f"{label} channel of {recording.path}"
-    significant = worst > 0.0
-    explanation = (f"{100 * worst:.3g} % of the samples of the {where} sit at full scale: the converter or amplifier "
-                   "clipped, and no linear model explains those stretches"
-                   if significant else "no channel reaches full scale")
+            clipping = clipped_samples(x)
+            fractions[f"{recording.path}:{label}"] = clipping.fraction
+            if clipping.fraction > worst:
+                worst, where, levels = clipping.fraction, f"{label} channel of {recording.path}", clipping.levels
+        spans, _ = clipped_stretches_of(recording)
+        if spans:
+            excluded[recording_key(recording)] = spans
+    already = bool(ctx.model.excluded) and all(ctx.model.excluded.get(k) for k in excluded)
+    significant = worst > 0.0 and not already
+    level_text = ", ".join(f"{v:+.3g}" for v in levels)
+    explanation = (f"{100 * worst:.3g} % of the samples of the {where} sit flat at {level_text} FS: the converter, "
+                   "amplifier or preamplifier clipped, and no linear model explains those stretches"
+                   if worst > 0 else "no channel clips")
+    if already:
+        explanation += "; the model already leaves the clipped stretches out"
     # Any clipping is significant; the score grows with the clipped fraction (1 at 0.1 %).
     score = max(worst / 1e-3, 1.0) if significant else 0.0
-    return finding("clipping", significant, score, {"fraction": worst, "channel": where}, explanation,
-                   "re-record with 3-6 dB less gain on that channel; no model change can undo clipping",
-                   {"fractions": list(fractions.values())})
+    return finding("clipping", significant, score,
+                   {"fraction": worst, "channel": where, "levels_fs": list(levels),
+                    "excluded_s": sum(b - a for spans in excluded.values() for a, b in spans)},
+                   explanation,
+                   "refine --add clipping (leaves the clipped stretches out of identification and validation); "
+                   "better, re-record with 3-6 dB less gain on that channel" if significant else "none",
+                   {"fractions": list(fractions.values()), "excluded": excluded})

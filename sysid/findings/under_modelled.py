@@ -15,14 +15,14 @@ import numpy as np
 
 from ..compare import Comparison
 from ..structures import mode_block, with_states
+from ..thresholds import EXCESS, EXPLAINS_GAIN, UNDER_MODELLED_EXCESS
 from ..validation import VALIDATION_BAND
 from . import DiagnosisContext, finding
 from .delay import refit_rms
 
 __all__ = ["under_modelled_finding", "worst_bands", "START_Q"]
 
-GAIN = 1.25
-EXCESS = 1.2
+GAIN = EXPLAINS_GAIN
 START_Q = 3.0
 
 
@@ -47,15 +47,24 @@ def under_modelled_finding(ctx: DiagnosisContext) -> dict:
     # The refit of the model as it is shows how much is mere parameter drift, not order.
     order_gain = reference / larger if larger > 0 else 0.0
     significant = gain >= GAIN and order_gain >= GAIN
-    above = [r for r in ctx.comparison.bands if r["ratio"] > 2.0]
+    # Far above the floor with nothing named, "nothing significant" is no answer: the model lacks
+    # something the named detectors do not know, and more order is the first thing to try.
+    fallback = not significant and ctx.excess >= UNDER_MODELLED_EXCESS
+    above = [r for r in ctx.comparison.bands if r["ratio"] > UNDER_MODELLED_EXCESS]
     span = f"{above[0]['low_hz']:.0f}-{above[-1]['high_hz']:.0f} Hz" if above else f"the {band['center_hz']:.0f} Hz band"
     explanation = (f"the error is {ctx.excess:.1f}x the noise floor over {span} (worst {band['ratio']:.1f}x at "
                    f"{band['center_hz']:.0f} Hz) and no single delay, factor or disturbance explains it; one more "
                    f"mode lowers it {gain:.2f}x: order {model.order} is too low for the dynamics in band")
-    if not significant:
+    if fallback:
+        explanation = (f"the error is {ctx.excess:.1f}x the noise floor over {span} (worst {band['ratio']:.1f}x at "
+                       f"{band['center_hz']:.0f} Hz) and no named effect explains it; one more mode alone lowers it "
+                       f"{gain:.2f}x: try order {model.order + 2} or more, or look for an effect not in the registry")
+    elif not significant:
         explanation = f"not significant (one more mode lowers the error only {gain:.2f}x); " + explanation
-    return finding("under-modelled", significant, min(gain, order_gain) / GAIN,
+    score = min(gain, order_gain) / GAIN
+    return finding("under-modelled", significant or fallback, max(score, 1.0) if fallback else score,
                    {"order": model.order, "suggested_order": model.order + 2, "worst_band_hz": band["center_hz"],
-                    "worst_band_ratio": band["ratio"]},
-                   explanation, "refine --add under-modelled" if significant else "none",
+                    "worst_band_ratio": band["ratio"],
+                    "bands_hz": [[round(r["low_hz"], 1), round(r["high_hz"], 1)] for r in above]},
+                   explanation, "refine --add under-modelled" if significant or fallback else "none",
                    {"rms_over_floor": ctx.excess, "rms_gain": gain, "gain_over_refit": order_gain})

@@ -70,19 +70,21 @@ def clock_drift_finding(ctx: DiagnosisContext) -> dict:
         spread = np.sqrt(np.sum((delays - fitted) ** 2) / max(delays.size - 2, 1))
         centred = centres[:delays.size] - centres[:delays.size].mean()
         error = spread / np.sqrt(np.sum(centred**2)) if spread > 0 else 1e-30
-        # A delay that shrinks means the ear channel's clock runs fast: positive ppm.
-        ppm = -1e6 * slope
+        # A fast ear clock takes its sample k at input time k / (1 + eps): the ear signal lags more
+        # and more, the delay grows by eps samples per sample. Positive ppm = ear clock fast.
+        ppm = 1e6 * slope
         t_stat = abs(slope) / error
     significant = abs(ppm) >= DRIFT_PPM and t_stat >= DRIFT_T
     per_second = ppm * 1e-6 * ctx.fs
-    explanation = (f"the delay changes linearly along the noise recording by {-per_second:.2f} samples/s: the ear "
+    explanation = (f"the delay changes linearly along the noise recording by {per_second:+.2f} samples/s: the ear "
                    f"channel's clock runs {abs(ppm):.1f} ppm {'fast' if ppm > 0 else 'slow'} against the input's "
                    f"({abs(ppm) * 1e-6 * 360 * 1500:.1f} deg/s of phase at 1.5 kHz)"
                    if significant else f"no delay trend along the recording ({ppm:.2f} ppm)")
     return finding("clock-drift", significant, min(abs(ppm) / DRIFT_PPM, t_stat / DRIFT_T),
                    {"ppm": ppm, "samples_per_second": per_second}, explanation,
-                   "record both channels from one clock, or resample the ear channel by "
-                   f"{-ppm:.1f} ppm before identification" if significant else "none",
+                   "refine --add clock-drift (resamples the ear channel by the ratio "
+                   f"{1 + ppm * 1e-6:.7f} and stores it in the model); better, record both channels from one clock"
+                   if significant else "none",
                    {"segment_delays": [float(d) for d in delays], "t_statistic": t_stat})
 
 

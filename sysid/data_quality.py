@@ -1,0 +1,97 @@
+"""Data quality of one recorded channel: DC offset and clipping, one algorithm each.
+
+Used by the loader's warnings (``sysid.recordings``), by the diagnosis findings
+(``sysid.findings.data_quality``) and by the data corrections of ``refine``.
+
+- DC offset: the median of the means of 16 equal parts. A real offset shifts
+  every part alike, while the slow response of a plant with a pole near z = 1
+  moves the mean of a few parts only. Significant when it exceeds twice the robust
+  spread of the part means (1.4826 MAD), ``DC_RELATIVE`` of the channel RMS and
+  ``DC_ABSOLUTE``.
+- Clipping at any level (a converter at its rails or a preamplifier that
+  flat-tops well below them): for each polarity the samples within ``TOP_WIDTH``
+  (relative) of the channel's extreme value form the top bin, the same width just
+  below it the next bin. A clipped channel piles its flat tops into the top bin, a
+  spike in the histogram many times the next bin; an unclipped sine (arcsine
+  density) gives a ratio of sqrt(2) + 1 = 2.4, noise much less. Samples at the
+  converter's rails count as clipped whatever the histogram.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["dc_offset", "clipped_samples", "clipped_stretches", "Clipping", "DC_RELATIVE", "DC_ABSOLUTE",
+           "CLIP_MIN_SAMPLES", "RAILS_16BIT"]
+
+DC_RELATIVE = 0.02
+DC_ABSOLUTE = 1e-4
+# Fewer clipped samples than this are legitimate peaks.
+CLIP_MIN_SAMPLES = 3
+RAILS_16BIT = (-1.0, 32767 / 32768.0)
+# Top-bin width relative to the extreme value (0.5 %, 0.04 dB), and how many times the next bin
+# the top bin must hold to be a clipping spike rather than the peak of a sine.
+TOP_WIDTH = 0.005
+SPIKE_RATIO = 6.0
+
+
+def dc_offset(x: np.ndarray, segments: int = 16) -> tuple[float, bool]:
+    """(offset in FS, whether it is significant); see the module docstring."""
+    x = np.asarray(x, float)
+    parts = np.array([part.mean() for part in np.array_split(x, min(segments, x.size))])
+    offset = float(np.median(parts))
+    spread = 1.4826 * float(np.median(np.abs(parts - offset)))
+    rms = float(np.sqrt(np.mean((x - offset) ** 2)))
+    significant = abs(offset) > DC_ABSOLUTE and abs(offset) > DC_RELATIVE * rms and abs(offset) > 2 * spread
+    return offset, significant
+
+
+@dataclass(frozen=True)
+class Clipping:
+    """Clipped samples of one channel: boolean mask, the clip levels found (FS), the fraction."""
+
+    mask: np.ndarray
+    levels: tuple[float, ...]
+
+    @property
+    def fraction(self) -> float:
+        return float(np.count_nonzero(self.mask) / self.mask.size) if self.mask.size else 0.0
+
+
+def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT) -> Clipping:
+    """The samples of x that sit at a clip level (any level, either polarity); see the module docstring."""
+    x = np.asarray(x, float)
+    mask = (x <= rails[0]) | (x >= rails[1])
+    levels = []
+    if np.count_nonzero(mask) >= CLIP_MIN_SAMPLES:
+        levels += [float(x[mask].min())] if np.any(x <= rails[0]) else []
+        levels += [float(x[mask].max())] if np.any(x >= rails[1]) else []
+    else:
+        mask[:] = False
+    for sign in (1.0, -1.0):
+        s = sign * x
+        top = float(s.max()) if s.size else 0.0
+        if top <= 0.0:
+            continue
+        width = TOP_WIDTH * top
+        in_top = s >= top - width
+        n_top = int(np.count_nonzero(in_top))
+        n_next = int(np.count_nonzero((s >= top - 2 * width) & ~in_top))
+        if n_top >= CLIP_MIN_SAMPLES and n_top > SPIKE_RATIO * max(n_next, 1):
+            mask |= in_top
+            levels.append(sign * top)
+    return Clipping(mask, tuple(sorted(set(levels))))
+
+
+def clipped_stretches(mask: np.ndarray, fs: float, margin_s: float) -> list[list[float]]:
+    """[start_s, stop_s] of the clipped runs of mask, each widened by margin_s and merged when they touch."""
+    index = np.flatnonzero(mask)
+    if index.size == 0:
+        return []
+    margin = int(round(margin_s * fs))
+    breaks = np.flatnonzero(np.diff(index) > 2 * margin + 1)
+    starts = np.concatenate(([index[0]], index[breaks + 1])) - margin
+    stops = np.concatenate((index[breaks], [index[-1]])) + margin + 1
+    return [[max(float(a), 0.0) / fs, min(float(b), mask.size) / fs] for a, b in zip(starts, stops)]
