@@ -16,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from sysid.files import OutputRefused, check_output_directory
 from sysid.model import Model
 
 from . import __version__, noise
 from .build import build_host
 from .cmsis import KERNEL_FUNCTIONS
-from .errors import CodegenError
+from .errors import CodegenError, OutputError
 from .plan import Plan, plan_firmware
 from .render import build_context, render_files, validate_name, write_directory
 from .verify import CmsisPackageFilter, verify_host
@@ -159,7 +160,7 @@ def _manifest_data(plan: Plan, name: str, variant: str, files: dict[str, str], v
 def generate_firmware(model, outdir, name: str | None = None, variant: str = "both", fs: float | None = None,
                       target: str = "generic", min_snr: float = 80.0, allow_unstable: bool = False, sweeps=None,
                       *, order: int | None = None, scaling: str = "linf", headroom_db: float = 6.0,
-                      quantiser: str = "efb") -> Manifest:
+                      quantiser: str = "efb", force: bool = False, progress=None) -> Manifest:
     """Generate (and with ``sweeps``, verify) the C filter of a model into ``outdir``.
 
     ``model`` is a :class:`sysid.model.Model` or a path to its JSON file; ``name``
@@ -167,8 +168,22 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
     (None: the model's rate); ``sweeps`` are WAV paths or full-scale arrays whose
     every sample is run through the host build. Raises a CodegenError subclass
     (a ValueError) on bad input, refusal or a failed verification, in which case
-    nothing is written.
+    nothing is written. ``outdir`` is checked first: a new folder, or one holding
+    only a previous output of ours (proved by its manifest), or any folder with
+    ``force``; only files a manifest of ours lists are ever replaced or removed.
+    ``progress(done, total, label)``, when given, is called at each stage.
     """
+    stages = ["design", "render", *(["verify"] if sweeps else []), "write"]
+
+    def stage(label: str) -> None:
+        if progress is not None:
+            progress(stages.index(label), len(stages), label)
+
+    try:
+        check_output_directory(outdir, "manifest.json", MANIFEST_FORMAT, force=force)
+    except OutputRefused as exc:
+        raise OutputError(str(exc)) from None
+    stage("design")
     model_file = None
     if not isinstance(model, Model):
         model_file = str(model)
@@ -179,9 +194,11 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
                          model_file=model_file)
     context = build_context(name=name, provenance=plan.provenance, fs=plan.realisation.fs, cascade=plan.cascade,
                             variants=tuple(plan.predictions), fixed=plan.fixed, floating=plan.floating, cmsis=plan.cmsis)
+    stage("render")
     files = render_files(context, target)
     verification = None
     if sweeps:
+        stage("verify")
         signals, labels = load_sweeps(sweeps, plan.realisation.fs)
         if target == "cmsis":
             host = CmsisPackageFilter(plan.cmsis)
@@ -190,7 +207,10 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
         verification = verify_host(plan, host, signals, labels)
     data = _json_ready(_manifest_data(plan, name, variant, files, verification))
     manifest_text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False, default=float) + "\n"
-    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text})
+    stage("write")
+    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text}, force=force)
+    if progress is not None:
+        progress(len(stages), len(stages), "done")
     return Manifest(outdir=Path(outdir), data=data)
 
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 import math
 import os
 import re
-import shutil
-import tempfile
 from importlib import resources
 from pathlib import Path
 
 import jinja2
+
+from sysid.files import OutputRefused, write_output_directory
 
 from . import __version__
 from .cmsis import KERNEL_FUNCTIONS
@@ -192,42 +192,17 @@ def render_files(context: dict, target: str = "generic") -> dict[str, str]:
     }
 
 
-def write_directory(outdir: str | os.PathLike, files: dict[str, str | bytes]) -> Path:
-    """Write ``files`` as the directory ``outdir``, all or nothing.
+def write_directory(outdir: str | os.PathLike, files: dict[str, str | bytes], force: bool = False) -> Path:
+    """Write ``files`` (``manifest.json`` among them) as the generated-code folder ``outdir``.
 
-    The files go to a temporary directory beside ``outdir`` that is renamed into
-    place; an existing ``outdir`` is replaced only after the new one is complete.
+    The rules are those of every helmet-anc output folder (:mod:`sysid.files`): a
+    new folder appears complete or not at all; an existing one is written only when
+    it holds nothing but a previous output our manifest proves, or with ``force``,
+    and only files a manifest of ours lists are ever removed.
     """
-    outdir = Path(outdir)
-    parent = outdir.parent if str(outdir.parent) else Path(".")
-    if outdir.exists() and not outdir.is_dir():
-        raise OutputError(f"{outdir}: exists and is not a directory")
-    if not parent.is_dir():
-        raise OutputError(f"{outdir}: parent directory {parent} does not exist")
+    from .api import MANIFEST_FORMAT
+
     try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.", dir=parent))
-    except OSError as exc:
-        raise OutputError(f"{outdir}: cannot write to {parent} ({exc.strerror})") from None
-    old = None
-    try:
-        for filename, content in files.items():
-            mode = "wb" if isinstance(content, bytes) else "w"
-            with open(staging / filename, mode, **({} if mode == "wb" else {"encoding": "utf-8"})) as handle:
-                handle.write(content)
-        os.chmod(staging, 0o755)
-        if outdir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.old.", dir=parent))
-            os.rmdir(old)
-            os.replace(outdir, old)
-        os.replace(staging, outdir)
-    except OSError as exc:
-        shutil.rmtree(staging, ignore_errors=True)
-        if old is not None and old.exists() and not outdir.exists():
-            os.replace(old, outdir)
-        raise OutputError(f"{outdir}: cannot write ({exc.strerror})") from None
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return outdir
+        return write_output_directory(outdir, files, "manifest.json", MANIFEST_FORMAT, force=force)
+    except OutputRefused as exc:
+        raise OutputError(str(exc)) from None

@@ -20,6 +20,35 @@ from sysid.recordings import RecordingWarning
 __all__ = ["main", "build_parser"]
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what a shell reports for Ctrl-C
+
+# One example per subcommand, shown at the end of its --help.
+EXAMPLES = {
+    "simulate": "helmet-anc simulate session --path fb --seed 1",
+    "identify": "helmet-anc identify --noise session/noise.wav --sweep session/sweep1.wav "
+                "--sweep session/sweep2.wav -o fb_model.json",
+    "compare": "helmet-anc compare fb_model.json --sweep session/sweep1.wav --sweep session/sweep2.wav",
+    "diagnose": "helmet-anc diagnose fb_model.json --noise session/noise.wav --sweep session/sweep1.wav "
+                "--sweep session/sweep2.wav",
+    "refine": "helmet-anc refine fb_model.json --auto --noise session/noise.wav --sweep session/sweep1.wav "
+              "--sweep session/sweep2.wav -o fb_refined.json",
+    "report": "helmet-anc report fb_model.json --noise session/noise.wav --sweep session/sweep1.wav "
+              "--sweep session/sweep2.wav -o fb_report.html",
+    "demo": "helmet-anc demo demo_output",
+    "batch": "helmet-anc batch sessions.csv -o batch_output",
+    "generate-firmware": "helmet-anc generate-firmware fb_model.json -o fb_firmware",
+}
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("helmet-anc")
+    except Exception:  # not installed (run from a source tree): the packages' own version
+        from codegen import __version__
+
+        return __version__
 
 
 class _Parser(argparse.ArgumentParser):
@@ -40,10 +69,16 @@ def _command_modules():
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="helmet-anc", description="Identify, diagnose and ship helmet ANC sound-path models.")
+    parser = _Parser(prog="helmet-anc", description="Identify, diagnose and ship helmet ANC sound-path models.",
+                     epilog="example: " + EXAMPLES["identify"])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display on stderr")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for module in _command_modules():
         module.register(commands)
+    for name, sub in commands.choices.items():
+        if name in EXAMPLES and not sub.epilog:
+            sub.epilog = "example: " + EXAMPLES[name]
     return parser
 
 
@@ -52,6 +87,16 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    leading = 0
+    while leading < len(argv) and argv[leading] in ("-q", "--quiet"):
+        leading += 1
+    global_options, rest = argv[:leading][:1], argv[leading:]
+    if rest[:1] == ["generate-firmware"]:
+        # Its options belong to the generate-firmware parser, --help included (design.md, "Layout").
+        from .firmware_cli import main as firmware_main
+
+        return _run_interruptible(lambda: firmware_main(rest[1:] + global_options, prog="helmet-anc generate-firmware"))
     args = build_parser().parse_args(argv)
     previous = warnings.showwarning
     warnings.showwarning = _one_line_warning
@@ -63,10 +108,18 @@ def main(argv=None) -> int:
         sys.stderr.write(f"helmet-anc {args.command}: error: {exc}\n")
         return EXIT_USAGE
     except KeyboardInterrupt:
-        sys.stderr.write("helmet-anc: interrupted\n")
-        return 130
+        sys.stderr.write(f"helmet-anc {args.command}: interrupted; no partial output left\n")
+        return EXIT_INTERRUPTED
     finally:
         warnings.showwarning = previous
+
+
+def _run_interruptible(run) -> int:
+    try:
+        return run()
+    except KeyboardInterrupt:
+        sys.stderr.write("helmet-anc: interrupted; no partial output left\n")
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from codegen import __version__
 from codegen.api import format_verification_table, generate_firmware
 from codegen.errors import CodegenError
 from codegen.plan import TARGETS, VARIANTS
+from sysid.grid import terminal_progress
 
 __all__ = ["build_parser", "main"]
 
@@ -25,11 +26,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+EXAMPLE = "example: generate-firmware fb_model.json -o fb_firmware --verify --sweep sweep1.wav --sweep sweep2.wav"
+
+
 def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
     parser = _Parser(prog=prog, description="Generate C filter code (float32 and Q15) for the ANC board from a "
-                                            "helmet-anc model, and verify it against the Python references.")
+                                            "helmet-anc model, and verify it against the Python references.",
+                     epilog=EXAMPLE.replace("generate-firmware", prog, 1))
     parser.add_argument("model", help="model JSON file (format helmet-anc/model@1)")
-    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory (written atomically)")
+    parser.add_argument("-o", "--output", required=True, metavar="DIR",
+                        help="output folder: a new one, or one holding only a previous generate-firmware output")
+    parser.add_argument("--force", action="store_true",
+                        help="write into a folder holding other files (only files a previous manifest lists are removed)")
     parser.add_argument("--name", help="C prefix of the generated symbols (default: the model's path, fb or ff)")
     parser.add_argument("--variant", choices=VARIANTS, default="both", help="float32, Q15 or both (default both)")
     parser.add_argument("--fs", type=float, help="board sample rate in Hz (default: the model's, 44.1 kHz)")
@@ -46,12 +54,13 @@ def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
     parser.add_argument("--verify", action="store_true", help="build on the host and run the sweeps through the C code")
     parser.add_argument("--sweep", action="append", default=[], metavar="WAV",
                         help="sweep recording for --verify (give it twice for the two sweeps)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display on stderr")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
+def main(argv=None, prog: str = "generate-firmware") -> int:
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     if args.verify and not args.sweep:
         print(f"{parser.prog}: error: --verify needs at least one --sweep WAV", file=sys.stderr)
@@ -63,7 +72,12 @@ def main(argv=None) -> int:
         manifest = generate_firmware(args.model, args.output, name=args.name, variant=args.variant, fs=args.fs,
                                      target=args.target, min_snr=args.min_snr, allow_unstable=args.allow_unstable,
                                      sweeps=args.sweep if args.verify else None, order=args.order,
-                                     scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser)
+                                     scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser,
+                                     force=args.force, progress=None if args.quiet else terminal_progress())
+    except KeyboardInterrupt:
+        # Every file is written by rename (sysid.files): an interrupt leaves no partial output.
+        print(f"{parser.prog}: interrupted; no partial output left", file=sys.stderr)
+        return 130
     except (CodegenError, ValueError) as exc:
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"{parser.prog}: error: {message}", file=sys.stderr)

@@ -31,7 +31,7 @@ import numpy as np
 from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
 from .recordings import Recording, check_same_rate
-from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, noise_floor
+from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor
 
 __all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "fit_sinusoids", "LAGS", "BOUND_99"]
 
@@ -143,6 +143,8 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     fs = check_same_rate(sweeps)
     if fs != model.fs:
         raise IdentificationError(f"model sample rate {model.fs:g} Hz differs from the sweeps' {fs:g} Hz")
+    model.check_stable()
+    check_repeats(*sweeps)
     first = int(round(SKIP_S * fs))
     per_sweep = []
     cleaned = []

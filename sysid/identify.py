@@ -24,7 +24,7 @@ from .output_error import block_data, refine_output_error
 from .recordings import Recording, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
-from .validation import VALIDATION_BAND, noise_floor, simulated_rms, sweep_spectrum
+from .validation import VALIDATION_BAND, check_repeats, noise_floor, simulated_rms, sweep_spectrum
 
 __all__ = ["IdentificationOptions", "Identification", "identify", "IDENTIFICATION_BAND"]
 
@@ -71,6 +71,7 @@ def _check_inputs(noise: Recording, sweeps: list[Recording], options: Identifica
     if len(sweeps) != 2:
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
+    check_repeats(*sweeps)
 
 
 def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",

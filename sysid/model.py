@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,39 +19,35 @@ import numpy as np
 
 from . import lti
 from .errors import ModelError
+from .files import atomic_write, atomic_write_text
 
 __all__ = ["Model", "MODEL_FORMAT", "PATHS", "atomic_write_text"]
 
 MODEL_FORMAT = "helmet-anc/model@1"
 PATHS = ("fb", "ff")
 _REQUIRED_KEYS = ("format", "path", "fs", "A", "B", "C", "D")
+# Sane limits of a helmet sound path (issue 12, "absurd sizes"): beyond them a model is a
+# corrupt or hand-edited file, and simulating it would take minutes and gigabytes.
+MAX_ORDER = 200            # states; identification's grid stops at 20, refinement adds a few
+MAX_DELAY_S = 1.0          # seconds of pure delay: 340 m of sound path
+MAX_COEFFICIENT = 1e8      # largest |entry| of A, B, C, D
+MAX_FS = 1e6               # Hz
+MAX_MODEL_BYTES = 64e6     # a model of MAX_ORDER states is well under 1 MB of JSON
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write text to path through a temporary file in the same folder, then rename.
-
-    A failure part-way leaves any previous file untouched and no partial file behind.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise ModelError(f"{path}: folder {folder} does not exist")
+def _numeric(value, name: str) -> np.ndarray:
+    """``value`` as a float array, or ModelError for text, nesting of unequal lengths, or objects."""
+    if isinstance(value, (str, bytes, dict)):
+        raise ModelError(f"{name} matrix is not numeric")
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=folder)
-    except OSError as exc:
-        raise ModelError(f"{path}: cannot write here ({exc.strerror})") from None
-    try:
-        # mkstemp creates the file private (0600); give it the mode an ordinary open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise ModelError(f"{name} matrix is not numeric, or its rows have different lengths") from None
+    if array.ndim > 2:
+        raise ModelError(f"{name} matrix has {array.ndim} dimensions; expected 2")
+    if not np.all(np.isfinite(array)):
+        raise ModelError(f"{name} matrix has non-finite entries (NaN or infinity)")
+    return array
 
 
 def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
@@ -105,26 +100,41 @@ class Model:
             raise ModelError(f"path must be one of {', '.join(PATHS)}; found {self.path!r}")
         try:
             self.fs = float(self.fs)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ModelError(f"fs must be a number; found {self.fs!r}") from None
         if not (math.isfinite(self.fs) and self.fs > 0):
             raise ModelError(f"fs must be a positive sample rate in Hz; found {self.fs}")
-        A = np.atleast_2d(np.asarray(self.A, dtype=float)) if np.size(self.A) else np.zeros((0, 0))
+        if self.fs > MAX_FS:
+            raise ModelError(f"fs must be at most {MAX_FS:g} Hz; found {self.fs:g}")
+        A = _numeric(self.A, "A")
+        A = np.atleast_2d(A) if A.size else np.zeros((0, 0))
         n = A.shape[0]
+        if n > MAX_ORDER:
+            raise ModelError(f"order {n} is above the limit of {MAX_ORDER} states")
         self.A = _matrix(A, "A", (n, n))
-        self.B = _matrix(np.asarray(self.B, dtype=float).reshape(-1, 1) if np.size(self.B) else np.zeros((n, 1)), "B", (n, 1))
-        self.C = _matrix(np.asarray(self.C, dtype=float).reshape(1, -1) if np.size(self.C) else np.zeros((1, n)), "C", (1, n))
+        B, C = _numeric(self.B, "B"), _numeric(self.C, "C")
+        self.B = _matrix(B.reshape(-1, 1) if B.size else np.zeros((n, 1)), "B", (n, 1))
+        self.C = _matrix(C.reshape(1, -1) if C.size else np.zeros((1, n)), "C", (1, n))
         self.D = _matrix(self.D, "D", (1, 1))
-        if int(self.delay) != self.delay or self.delay < 0:
+        for label in ("A", "B", "C", "D"):
+            largest = float(np.max(np.abs(getattr(self, label)), initial=0.0))
+            if largest > MAX_COEFFICIENT:
+                raise ModelError(f"{label} matrix has an entry of magnitude {largest:.3g}, above the limit of "
+                                 f"{MAX_COEFFICIENT:g}")
+        if isinstance(self.delay, bool) or not isinstance(self.delay, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(float(min(self.delay, 1e300))) or int(self.delay) != self.delay or self.delay < 0:
             raise ModelError(f"delay must be a non-negative whole number of samples; found {self.delay!r}")
+        if self.delay > MAX_DELAY_S * self.fs:
+            raise ModelError(f"delay of {self.delay:g} samples is above the limit of {MAX_DELAY_S:g} s "
+                             f"({MAX_DELAY_S * self.fs:.0f} samples at {self.fs:g} Hz)")
         self.delay = int(self.delay)
         if self.input_nonlinearity is not None:
-            coefficients = np.asarray(self.input_nonlinearity, dtype=float).reshape(-1)
-            if coefficients.size == 0 or not np.all(np.isfinite(coefficients)):
+            coefficients = _numeric(self.input_nonlinearity, "input_nonlinearity").reshape(-1)
+            if coefficients.size == 0 or np.max(np.abs(coefficients)) > MAX_COEFFICIENT:
                 raise ModelError("input_nonlinearity needs finite coefficients [a1, a2, ...]")
             self.input_nonlinearity = [float(c) for c in coefficients]
         if self.disturbance_frequencies is not None:
-            frequencies = np.asarray(self.disturbance_frequencies, dtype=float).reshape(-1)
+            frequencies = _numeric(self.disturbance_frequencies, "disturbance frequencies").reshape(-1)
             if np.any(~np.isfinite(frequencies)) or np.any(frequencies <= 0) or np.any(frequencies >= self.fs / 2):
                 raise ModelError("disturbance frequencies must lie between 0 and fs/2")
             self.disturbance_frequencies = [float(f) for f in frequencies]
@@ -157,6 +167,13 @@ class Model:
     @property
     def stable(self) -> bool:
         return self.spectral_radius < 1.0
+
+    def check_stable(self, name: str = "model") -> "Model":
+        """This model, or ModelError when a pole lies on or outside the unit circle (its simulation diverges)."""
+        if not self.stable:
+            raise ModelError(f"{name}: model is unstable (largest pole radius {self.spectral_radius:.6f} >= 1), so "
+                             "its simulation diverges; identify it again or refine it from a stable model")
+        return self
 
     def poles(self) -> np.ndarray:
         return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
@@ -281,34 +298,37 @@ class Model:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Model":
+        if Path(path).is_dir():
+            raise ModelError(f"{path}: is a folder; give the model's JSON file")
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            raw = Path(path).read_bytes()
         except OSError as exc:
             raise ModelError(f"{path}: cannot read model ({exc.strerror})") from None
+        if raw[:4] in (b"RIFF", b"RIFX", b"RF64"):
+            raise ModelError(f"{path}: is a WAV recording, not a model; give the model JSON (e.g. from identify -o)")
+        if len(raw) > MAX_MODEL_BYTES:
+            raise ModelError(f"{path}: {len(raw) / 1e6:.0f} MB is too large for a model file (limit "
+                             f"{MAX_MODEL_BYTES / 1e6:.0f} MB)")
         try:
-            data = json.loads(text)
+            data = json.loads(raw.decode("utf-8"))
+        except UnicodeDecodeError:
+            raise ModelError(f"{path}: not a model JSON file (not UTF-8 text)") from None
         except json.JSONDecodeError as exc:
             raise ModelError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        except RecursionError:
+            raise ModelError(f"{path}: not a model JSON file (nested too deeply)") from None
         try:
             return cls.from_dict(data)
         except ModelError as exc:
             raise ModelError(f"{path}: {exc}") from None
 
     def save_mat(self, path: str | os.PathLike) -> None:
-        """Export A, B, C, D, Ts (s), delay (samples) and path for MATLAB (.mat, v5)."""
+        """Export A, B, C, D, Ts (s), delay (samples) and path for MATLAB (.mat, v5), atomically.
+
+        ``format`` holds the model format tag, which marks the file as ours (sysid.files.is_ours).
+        """
         import scipy.io
 
-        folder = Path(path).parent
-        fd, tmp = tempfile.mkstemp(prefix=".model.", suffix=".mat", dir=folder if str(folder) else ".")
-        os.close(fd)
-        try:
-            scipy.io.savemat(
-                tmp,
-                {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "Ts": 1.0 / self.fs,
-                 "fs": self.fs, "delay": float(self.delay), "path": self.path},
-            )
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        variables = {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "Ts": 1.0 / self.fs,
+                     "fs": self.fs, "delay": float(self.delay), "path": self.path, "format": MODEL_FORMAT}
+        atomic_write(path, lambda tmp: scipy.io.savemat(tmp, variables))

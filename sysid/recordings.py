@@ -91,6 +91,8 @@ def _quality(name: str, u: np.ndarray, y: np.ndarray, rails: tuple[float, float]
 def load_recording(path, input_channel: int = 0, output_channel: int = 1) -> Recording:
     """Load a stereo WAV file as a Recording (see the module docstring for scaling)."""
     name = str(path)
+    if Path(path).is_dir():
+        raise RecordingError(f"{name}: is a folder; give a WAV file")
     if not Path(path).is_file():
         raise RecordingError(f"{name}: no such file")
     try:

@@ -21,7 +21,8 @@ import scipy.signal
 from .data_quality import clipped_samples
 from .effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .errors import HelmetAncError
-from .model import Model, atomic_write_text
+from .files import atomic_write, atomic_write_text
+from .model import Model
 from .plants import appendix_a_model
 from .recordings import Recording, write_wav16
 from .structures import factor_coefficients, series, tf_to_statespace
@@ -296,12 +297,6 @@ def write_session(session: Session, outdir) -> dict[str, Path]:
     # Write each file beside its final name and rename, so a failure leaves no partial session file.
     recordings = {"noise": session.noise, "sweep1": session.sweeps[0], "sweep2": session.sweeps[1]}
     for key, recording in recordings.items():
-        tmp = files[key].with_name(f".{files[key].name}.partial")
-        try:
-            write_wav16(tmp, recording.u, recording.y, recording.fs)
-            tmp.replace(files[key])
-        except OSError as exc:
-            tmp.unlink(missing_ok=True)
-            raise HelmetAncError(f"{files[key]}: cannot write ({exc.strerror})") from None
+        atomic_write(files[key], lambda tmp, r=recording: write_wav16(tmp, r.u, r.y, r.fs))
     atomic_write_text(files["truth"], json.dumps(session.truth, indent=2) + "\n")
     return files

@@ -27,7 +27,7 @@ from .errors import IdentificationError
 from .recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
-           "noise_floor", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
+           "noise_floor", "check_repeats", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
 VALIDATION_BAND = (20.0, 4000.0)
@@ -139,6 +139,23 @@ def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip
         raise IdentificationError(f"{sweep1.path}, {sweep2.path}: sweeps do not overlap enough to estimate the noise floor")
     difference = y1[first:n] - y2[first:n]
     return band_rms(difference, sweep1.fs, band) / np.sqrt(2.0)
+
+
+def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S) -> None:
+    """IdentificationError when the two sweeps cannot give a noise floor: sample-identical ear signals.
+
+    The floor is the difference of two repeats (``noise_floor``); the same file given
+    twice, or a copy of it, makes that difference exactly zero, every error ratio
+    infinite and every band "above the noise floor". No other estimate of the output
+    noise exists in the sweeps, so this is an error rather than a warning.
+    """
+    lag = _align(sweep1.u, sweep2.u)
+    y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
+    first = int(round(skip_s * sweep1.fs))
+    n = min(y1.size, y2.size)
+    if n - first >= 2 and np.array_equal(y1[first:n], y2[first:n]):
+        raise IdentificationError(f"{sweep1.path}, {sweep2.path}: the two sweeps are sample-identical (the same "
+                                  "recording twice?), so the noise floor is unknown; give two separate recordings")
 
 
 def simulated_rms(model, sweeps: list[Recording], band=VALIDATION_BAND, skip_s: float = SKIP_S) -> float:

@@ -6,10 +6,14 @@ import argparse
 from pathlib import Path
 
 from sysid.errors import HelmetAncError
+from sysid.files import check_output_file
 from sysid.identify import Identification
+from sysid.model import Model
 from sysid.recordings import load_recording
+from sysid.validation import check_repeats
 
-__all__ = ["add_recording_options", "load_sweeps", "check_output", "check_report_target", "identification_summary"]
+__all__ = ["add_recording_options", "add_force_option", "load_sweeps", "load_model", "check_output",
+           "check_report_target", "identification_summary"]
 
 
 def add_recording_options(parser: argparse.ArgumentParser, noise: bool = True) -> None:
@@ -21,28 +25,45 @@ def add_recording_options(parser: argparse.ArgumentParser, noise: bool = True) -
     parser.add_argument("--output-channel", type=int, default=1, help="channel of the ear microphone (default 1)")
 
 
+def add_force_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force", action="store_true",
+                        help="replace an existing output file that helmet-anc did not write (never an input)")
+
+
+def _inputs(args) -> list[str]:
+    """Every input file named on the command line: an output must never be one of them."""
+    found = []
+    for key in ("model", "noise", "sweep"):
+        value = getattr(args, key, None)
+        found.extend(value if isinstance(value, list) else [value] if value else [])
+    return found
+
+
 def load_sweeps(args) -> list:
     if len(args.sweep) != 2:
         raise HelmetAncError(f"give --sweep exactly twice (the two repeated sweeps); found {len(args.sweep)}")
-    return [load_recording(p, args.input_channel, args.output_channel) for p in args.sweep]
+    sweeps = [load_recording(p, args.input_channel, args.output_channel) for p in args.sweep]
+    check_repeats(*sweeps)
+    return sweeps
 
 
-def check_output(path: str) -> Path:
-    target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise HelmetAncError(f"{target}: folder {folder} does not exist")
-    if target.is_dir():
-        raise HelmetAncError(f"{target}: is a folder; give a file name")
-    return target
+def load_model(path: str) -> Model:
+    """The model file's model, refused when unstable (every command here simulates it)."""
+    return Model.load(path).check_stable(path)
 
 
-def check_report_target(path: str | None) -> Path | None:
+def check_output(path: str, args=None, option: str = "-o") -> Path:
+    """An output file checked before any work: not a folder, not an input, ours or --force, writable folder."""
+    return check_output_file(path, inputs=_inputs(args) if args is not None else (),
+                             force=bool(getattr(args, "force", False)), option=option)
+
+
+def check_report_target(path: str | None, args=None) -> Path | None:
     """The --report target: an existing folder, or a file whose folder exists (checked before any work)."""
     if path is None:
         return None
     target = Path(path)
-    return target if target.is_dir() else check_output(path)
+    return target if target.is_dir() else check_output(path, args, "--report")
 
 
 def identification_summary(result: Identification) -> str:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from sysid.grid import parse_range, terminal_progress
 from sysid.identify import IdentificationOptions, identify
-from sysid.model import atomic_write_text
+from sysid.files import atomic_write_text
 from sysid.recordings import load_recording
 from sysid.spectra import ESTIMATORS
-from .common import add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
+from .common import add_force_option, add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
 
 ORDER = 20
 
@@ -24,20 +24,21 @@ def register(commands) -> None:
     parser.add_argument("--mat", metavar="FILE.mat", help="also export the model for MATLAB")
     parser.add_argument("--report", metavar="PATH", help="also write the HTML report (a file, or a folder for <path>-report.html)")
     parser.add_argument("-o", "--output", required=True, metavar="model.json")
+    add_force_option(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args) -> int:
-    output = check_output(args.output)
-    mat = check_output(args.mat) if args.mat else None
-    report_target = check_report_target(args.report)
+    output = check_output(args.output, args)
+    table = check_output(output.with_name(output.stem + ".grid.csv"), args, "-o (grid table)")
+    mat = check_output(args.mat, args, "--mat") if args.mat else None
+    report_target = check_report_target(args.report, args)
     options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
                                     feedthrough=args.feedthrough)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
-    result = identify(noise, sweeps, args.path, options, progress=terminal_progress())
-    table = output.with_name(output.stem + ".grid.csv")
+    result = identify(noise, sweeps, args.path, options, progress=None if args.quiet else terminal_progress())
     result.model.save(output)
     atomic_write_text(table, result.grid.to_csv())
     if mat:

@@ -8,7 +8,7 @@ from sysid.errors import HelmetAncError
 from sysid.model import Model
 from sysid.recordings import load_recording
 from sysid.refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
-from .common import add_recording_options, check_output, check_report_target, load_sweeps
+from .common import add_force_option, add_recording_options, check_output, check_report_target, load_sweeps
 
 ORDER = 32
 
@@ -22,6 +22,7 @@ def register(commands) -> None:
     parser.add_argument("--auto", action="store_true", help="diagnose, add the top finding, refit, until done")
     parser.add_argument("--report", metavar="PATH", help="also write the HTML report of the refined model (file or folder)")
     parser.add_argument("-o", "--output", required=True, metavar="NEW.json")
+    add_force_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -29,8 +30,8 @@ def run(args) -> int:
     if bool(args.add) == bool(args.auto):
         raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
     specs = [parse_refinement(text) for text in args.add]
-    output = check_output(args.output)
-    report_target = check_report_target(args.report)
+    output = check_output(args.output, args)
+    report_target = check_report_target(args.report, args)
     model = Model.load(args.model)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)

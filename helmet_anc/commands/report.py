@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 from sysid.errors import HelmetAncError
-from sysid.model import Model
 from sysid.recordings import load_recording
 from sysid.report.data import GRID_CHOICES
-from .common import add_recording_options, check_output, load_sweeps
+from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
 
 ORDER = 60
 
@@ -19,14 +18,15 @@ def register(commands) -> None:
                         help="recompute the (gamma, order) grid over a modest range, or skip it (default modest)")
     parser.add_argument("--dpi", type=float, default=100.0, help="resolution of the embedded figures (default 100)")
     parser.add_argument("-o", "--output", required=True, metavar="report.html")
+    add_force_option(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args) -> int:
-    output = check_output(args.output)
+    output = check_output(args.output, args)
     if not 20.0 <= args.dpi <= 400.0:
         raise HelmetAncError(f"--dpi must be between 20 and 400; found {args.dpi:g}")
-    model = Model.load(args.model)
+    model = load_model(args.model)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
     from sysid.report.html import (

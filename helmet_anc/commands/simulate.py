@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from sysid.errors import HelmetAncError
+from sysid.files import OutputRefused, check_output_file, is_ours
 from sysid.effect_spec import parse_effect
 from sysid.random_plant import random_session
 from sysid.simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
@@ -25,10 +28,34 @@ def register(commands) -> None:
     parser.add_argument("--input-noise", type=float, default=2e-5, help="input-channel noise RMS (FS)")
     parser.add_argument("--effect", action="append", default=[], metavar="KIND[:PARAMS]",
                         help="hidden effect, repeatable: " + ", ".join(SIMULATED_EFFECTS) + " (e.g. delay:23, resonance:3400,8,10)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace session files in OUTDIR that helmet-anc did not write")
     parser.set_defaults(handler=run)
 
 
+SESSION_FILES = ("noise.wav", "sweep1.wav", "sweep2.wav", "truth.json")
+
+
+def check_session_folder(outdir: str, force: bool) -> None:
+    """Before any work: OUTDIR is a folder (or can be made), and its session files are ours or --force.
+
+    A session's recordings are ours when its truth.json is (the WAV files carry no tag).
+    """
+    folder = Path(outdir)
+    if folder.exists() and not folder.is_dir():
+        raise OutputRefused(f"{folder}: exists and is not a folder; give a folder for the session")
+    if not folder.exists():
+        existing = next((p for p in folder.parents if p.exists()), Path("."))
+        if not existing.is_dir():
+            raise OutputRefused(f"{folder}: cannot create a folder under {existing}, which is a file")
+        return
+    ours = is_ours(folder / "truth.json")
+    for name in SESSION_FILES:
+        check_output_file(folder / name, force=force, option="outdir", ours=lambda _: ours)
+
+
 def run(args) -> int:
+    check_session_folder(args.outdir, args.force)
     output_noise = {} if args.output_noise is None else {"output_noise": args.output_noise}
     settings = dict(noise_duration=args.noise_seconds, sweep_duration=args.sweep_seconds,
                     input_noise=args.input_noise, **output_noise)

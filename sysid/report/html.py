@@ -267,6 +267,7 @@ def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None
                          for key, heading in SECTIONS)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<meta name="generator" content="helmet-anc">'
             f"<title>{escape(title)}</title><style>{_CSS}</style></head><body>\n"
             f"<h1>{escape(title)}</h1>\n{summary_table(data)}\n{contents}\n{sections}\n</body></html>\n")
 
