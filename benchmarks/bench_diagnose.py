@@ -1,21 +1,20 @@
-"""Benchmark of diagnose and refine --auto over random synthetic sessions, per effect.
+"""Benchmark of diagnose and refine --auto in the self-identified workflow, on random helmets.
 
-For each effect, sessions with random parameters (seeded) are simulated at the
-thesis's length (20 s noise, 5 s sweeps) or shorter with ``--short``; a model is
-identified at the seed's published order (FB 7, FF 5), then diagnosed and
-auto-refined. For the series factors (resonance, high-pass, low-pass) the model is
-identified on a clean session of the same helmet and the effect appears in the new
-recordings: identified on the session itself, a nominal-order model takes the
-factor in and gives up a weak plant mode instead. Reports detection rate (the effect is the top significant finding),
-false-alarm rate on clean sessions, parameter error, rms/noise floor before and
-after refinement and the time of each step. Prints a Markdown table.
+As a user works: a session of a random plausible helmet (``sysid.random_plant``)
+with hidden effects at random parameters is simulated; the model is identified on
+that very session, then diagnosed and auto-refined. Per effect (alone, and in pairs
+and triples): detection rate (the effect among the top two significant findings),
+median parameter error, rms / noise floor before and after ``refine --auto``, steps
+taken, stop reasons, and the CPU and wall time of diagnose and refine --auto; on
+clean sessions the false-alarm rate (any significant finding). Prints Markdown.
 
-    python benchmarks/bench_diagnose.py [--sessions 4] [--short]
+    python benchmarks/bench_diagnose.py [--sessions 2] [--thesis] [--kinds delay,clipping] [--clean 10]
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import sys
 import time
 
@@ -23,161 +22,138 @@ import numpy as np
 
 from sysid.diagnose import diagnose
 from sysid.identify import IdentificationOptions, identify
+from sysid.random_plant import random_session
 from sysid.refine import refine_auto
-from sysid.simulate import SessionSpec, simulate_session
 
-ORDER = {"fb": 7, "ff": 5}
-REFIT = IdentificationOptions(gammas=(50, 100, 200, 400), refine_seconds=5.0)
+SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
+OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 60)), refine_seconds=3.0)
 
 
-def random_effect(kind: str, rng) -> tuple[str, float | None]:
-    """(spec, true value of the estimated parameter) with parameters drawn from effects.md ranges."""
+def random_effect(kind: str, rng) -> tuple[str, str | None, float | None]:
+    """(spec, parameter checked, its true value) with parameters drawn from effects.md's ranges."""
     if kind == "delay":
         d = int(rng.integers(5, 50))
-        return f"delay:{d}", d
+        return f"delay:{d}", "samples", d
     if kind == "periodic-disturbance":
         f = float(rng.choice([50.0, 60.0, 41.7]))
-        return f"periodic-disturbance:{f},3,{rng.uniform(3e-4, 2e-3):.2e}", f
+        return f"periodic-disturbance:{f},3,{rng.uniform(3e-4, 2e-3):.2e}", "frequencies_hz", f
     if kind == "input-nonlinearity":
-        h3 = float(rng.uniform(-45, -30))
-        return f"input-nonlinearity:{rng.uniform(-50, -35):.1f},{h3:.1f}", h3
+        h2 = float(rng.uniform(-45, -30))
+        return f"input-nonlinearity:{h2:.1f},{rng.uniform(-45, -30):.1f}", "h2_db", h2
     if kind == "input-noise":
         snr = float(rng.uniform(3, 12))
-        return f"input-noise:{snr:.1f}", snr
+        return f"input-noise:{snr:.1f}", "input_snr_db", snr
     if kind == "clock-drift":
         ppm = float(rng.uniform(20, 100) * rng.choice([-1, 1]))
-        return f"clock-drift:{ppm:.1f}", ppm
+        return f"clock-drift:{ppm:.1f}", "ppm", ppm
     if kind == "time-variation":
-        return f"time-variation:{rng.uniform(4, 8):.1f}", None
+        return f"time-variation:{rng.uniform(2, 5) * rng.choice([-1, 1]):.1f},200,{int(rng.integers(0, 3))}", None, None
     if kind == "dc-offset":
-        level = float(rng.uniform(0.005, 0.03))
-        return f"dc-offset:{level:.4f}", level
+        level = float(rng.uniform(0.003, 0.03) * rng.choice([-1, 1]))
+        return f"dc-offset:{level:.4f}", "ear_offset_fs", level
     if kind == "clipping":
-        return f"clipping:{rng.uniform(1.1, 1.6):.2f}", None
+        return f"clipping:{rng.uniform(1.1, 1.6):.2f},{rng.choice([1.0, rng.uniform(0.1, 0.6)]):.2f}", None, None
     if kind == "resonance":
         f0 = float(np.exp(rng.uniform(np.log(60.0), np.log(3600.0))))
-        return f"resonance:{f0:.1f},{rng.uniform(3, 15):.2f},{rng.uniform(6, 14) * rng.choice([1, 1, -1]):.2f}", f0
+        return (f"resonance:{f0:.1f},{rng.uniform(3, 15):.2f},{rng.uniform(6, 14) * rng.choice([1, 1, -1]):.2f}",
+                "f0_hz", f0)
     if kind == "highpass":
         corner = float(rng.uniform(10.0, 80.0))
-        return f"highpass:{corner:.1f},{int(rng.integers(1, 3))}", corner
+        return f"highpass:{corner:.1f},{int(rng.integers(1, 3))}", "corner_hz", corner
     if kind == "lowpass":
         corner = float(np.exp(rng.uniform(np.log(1000.0), np.log(16000.0))))
-        return f"lowpass:{corner:.0f},{int(rng.integers(1, 3))}", corner
+        return f"lowpass:{corner:.0f},{int(rng.integers(1, 3))}", "corner_hz", corner
     raise ValueError(kind)
 
 
-ESTIMATE = {"delay": "samples", "periodic-disturbance": "frequencies_hz", "input-nonlinearity": "h3_db",
-            "input-noise": "input_snr_db", "clock-drift": "ppm", "dc-offset": "offset_fs", "resonance": "f0_hz",
-            "highpass": "corner_hz", "lowpass": "corner_hz"}
-FACTORS = ("resonance", "highpass", "lowpass")
-RELATIVE = ("clock-drift", "dc-offset") + FACTORS
-PATHS = {"input-nonlinearity": ("ff",), "input-noise": ("ff",)}
+KINDS = ["delay", "resonance", "highpass", "lowpass", "periodic-disturbance", "input-nonlinearity", "input-noise",
+         "dc-offset", "clipping", "clock-drift", "time-variation"]
+COMBINATIONS = [("delay", "periodic-disturbance"), ("dc-offset", "lowpass"), ("clock-drift", "input-nonlinearity"),
+                ("delay", "clipping", "periodic-disturbance")]
+RELATIVE = ("clock-drift", "dc-offset", "resonance", "highpass", "lowpass")
 
 
-def run_session(path, seed, effects, spec_changes, refine, reference=False):
-    session = simulate_session(SessionSpec(path=path, seed=seed, **spec_changes), effects=effects)
-    known = simulate_session(SessionSpec(path=path, seed=seed, **spec_changes)) if reference else session
-    # The nominal order, or the best stable one below it when the grid has none at it.
-    model = identify(known.noise, known.sweeps, path,
-                     IdentificationOptions(gammas=tuple(range(50, 551, 50)), orders=tuple(range(1, ORDER[path] + 1)),
-                                           refine_seconds=5.0)).model
+def run_session(path: str, seed: int, effects: list[str], changes: dict) -> dict:
+    session = random_session(seed, path, effects=effects, **changes)
     t0 = time.perf_counter()
+    model = identify(session.noise, session.sweeps, path, OPTIONS).model
+    t_identify = time.perf_counter() - t0
+    c0, t0 = time.process_time(), time.perf_counter()
     findings = diagnose(model, session.noise, session.sweeps)
-    t_diag = time.perf_counter() - t0
-    result = {"findings": findings, "t_diagnose": t_diag, "before": findings.comparison.ratio}
-    if refine:
-        t0 = time.perf_counter()
-        final, steps = refine_auto(model, session.noise, session.sweeps, REFIT)
-        result["t_refine"] = time.perf_counter() - t0
-        from sysid.compare import compare
-        result["after"] = compare(final, session.sweeps).ratio
-        band = np.linspace(20.0, 1500.0, 300)
-        truth = session.plant.frequency_response(band)
-        for key, m in (("bias_before", model), ("bias_after", final)):
-            result[key] = float(np.max(np.abs(20 * np.log10(np.abs(m.frequency_response(band) / truth)))))
+    diag = (time.process_time() - c0, time.perf_counter() - t0)
+    result = {"findings": findings, "diagnose": diag, "identify": t_identify, "before": findings.comparison.ratio}
+    if effects:
+        c0, t0 = time.process_time(), time.perf_counter()
+        auto = refine_auto(model, session.noise, session.sweeps, OPTIONS)
+        result.update(refine=(time.process_time() - c0, time.perf_counter() - t0), after=auto.after.ratio,
+                      steps=len(auto.steps), stop=auto.stop_reason.split(":")[0].split(";")[0])
     return result
+
+
+def error_of(kind, value, truth):
+    value = value[0] if isinstance(value, list) else value
+    return abs(value / truth - 1) * 100 if kind in RELATIVE else abs(value - truth)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--sessions", type=int, default=4)
-    parser.add_argument("--short", action="store_true", help="8 s noise, 2 s sweeps instead of 20 s / 5 s")
-    parser.add_argument("--kinds", help="comma-separated effects to run (default: all)")
-    parser.add_argument("--timing", type=int, default=0, metavar="N",
-                        help="only time diagnose and refine --auto on N thesis-length sessions per path (delay:23)")
+    parser.add_argument("--sessions", type=int, default=2, help="sessions per effect and path")
+    parser.add_argument("--clean", type=int, default=10, help="clean sessions per path")
+    parser.add_argument("--thesis", action="store_true", help="20 s noise, 5 s sweeps instead of 8 s / 2 s")
+    parser.add_argument("--kinds", help="comma-separated effects (default: all, then the combinations)")
     args = parser.parse_args()
-    if args.timing:
-        timing(args.timing)
-        return
-    changes = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2) if args.short else {}
+    changes = {} if args.thesis else SHORT
+    cases = [(k,) for k in (args.kinds.split(",") if args.kinds else KINDS)]
+    cases += [] if args.kinds else COMBINATIONS
+    alarms, clean, clean_times = 0, 0, []
+    for path in ("fb", "ff"):
+        for k in range(args.clean):
+            r = run_session(path, 1000 + k, [], changes)
+            clean += 1
+            alarms += bool(r["findings"].significant)
+            clean_times.append(r["diagnose"])
+            print(f"clean {path} {k}: {r['before']:.2f}x {[f['effect'] for f in r['findings'].significant]}",
+                  file=sys.stderr, flush=True)
     rows = []
-    clean_alarms, clean_total, clean_times = 0, 0, []
-    for path in ("fb", "ff"):
-        for k in range(args.sessions):
-            r = run_session(path, 100 + k, [], changes, refine=False)
-            clean_total += 1
-            clean_alarms += bool(r["findings"].significant)
-            clean_times.append(r["t_diagnose"])
-    kinds = ["delay", "resonance", "highpass", "lowpass", "periodic-disturbance", "input-nonlinearity", "input-noise",
-             "dc-offset", "clipping", "clock-drift", "time-variation"]
-    if args.kinds:
-        unknown = set(args.kinds.split(",")) - set(kinds)
-        if unknown:
-            parser.error(f"unknown effect(s): {', '.join(sorted(unknown))}")
-        kinds = args.kinds.split(",")
-    for kind in kinds:
-        hits, errors, before, after, t_d, t_r, total, bias = 0, [], [], [], [], [], 0, []
-        refinable = kind in ("delay", "periodic-disturbance", "input-nonlinearity", "input-noise") + FACTORS
-        for path in PATHS.get(kind, ("fb", "ff")):
+    for case in cases:
+        stats = collections.defaultdict(list)
+        for path in ("fb", "ff"):
             for k in range(args.sessions):
-                rng = np.random.default_rng([k, len(kind), ord(path[1])])
-                spec, truth = random_effect(kind, rng)
-                r = run_session(path, 200 + k, [spec], changes, refine=refinable, reference=kind in FACTORS)
-                total += 1
-                significant = r["findings"].significant
-                hit = bool(significant) and significant[0]["effect"] == kind
-                hits += hit
-                if hit and truth is not None and kind in ESTIMATE:
-                    value = significant[0]["params"][ESTIMATE[kind]]
-                    value = value[0] if isinstance(value, list) else value
-                    errors.append(abs(value - truth) if kind not in RELATIVE else abs(value / truth - 1) * 100)
-                before.append(r["before"])
-                if refinable:
-                    after.append(r["after"])
-                    bias.append((r["bias_before"], r["bias_after"]))
-                    t_r.append(r["t_refine"])
-                t_d.append(r["t_diagnose"])
-        unit = {"delay": "samples", "periodic-disturbance": "Hz", "input-nonlinearity": "dB (H3)",
-                "input-noise": "dB (SNR)", "clock-drift": "% of ppm", "dc-offset": "% of offset", "resonance": "% of f0",
-                "highpass": "% of corner", "lowpass": "% of corner"}.get(kind, "")
-        print(f"{kind}: done", file=sys.stderr, flush=True)
-        rows.append(f"| {kind} | {total} | {100 * hits / total:.0f} % | "
-                    f"{(f'{np.median(errors):.3g} {unit}' if errors else '-')} | {np.median(before):.2f} | "
-                    f"{(f'{np.median(after):.2f}' if after else '-')} | {np.median(t_d):.2f} | "
-                    f"{(f'{np.median(t_r):.1f}' if t_r else '-')} | "
-                    f"{(f'{np.median([b[0] for b in bias]):.2f} -> {np.median([b[1] for b in bias]):.2f}' if bias else '-')} |")
-    print(f"False alarms on clean sessions: {clean_alarms} of {clean_total} "
-          f"(diagnose median {np.median(clean_times):.2f} s)\n")
-    print("| effect | sessions | detected (top finding) | median parameter error | rms/floor before | "
-          "rms/floor after refine --auto | diagnose (s) | refine --auto (s) | max FRF error 20 Hz-1.5 kHz (dB) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+                rng = np.random.default_rng([k, sum(map(len, case)), ord(path[1])])
+                drawn = [random_effect(kind, rng) for kind in case]
+                r = run_session(path, 200 + k, [d[0] for d in drawn], changes)
+                top_two = [f for f in r["findings"].significant[:2]]
+                for kind, (_, name, truth) in zip(case, drawn):
+                    hit = next((f for f in top_two if f["effect"] == kind), None)
+                    stats["hits"].append(hit is not None)
+                    if hit is not None and name is not None and name in hit["params"]:
+                        stats["errors"].append(error_of(kind, hit["params"][name], truth))
+                stats["before"].append(r["before"])
+                stats["after"].append(r["after"])
+                stats["steps"].append(r["steps"])
+                stats["stop"].append(r["stop"])
+                stats["diag_cpu"].append(r["diagnose"][0])
+                stats["refine_cpu"].append(r["refine"][0])
+                stats["refine_wall"].append(r["refine"][1])
+                stats["identify"].append(r["identify"])
+                print(f"{'+'.join(case)} {path} {k}: {[d[0] for d in drawn]} {r['before']:.2f}x -> {r['after']:.2f}x "
+                      f"[{r['stop']}] found {[f['effect'] for f in top_two]}", file=sys.stderr, flush=True)
+        at_floor = np.mean(np.array(stats["after"]) <= 1.2)
+        error = f"{np.median(stats['errors']):.3g}" if stats["errors"] else "-"
+        stops = ", ".join(f"{n} {s}" for s, n in collections.Counter(stats["stop"]).most_common())
+        rows.append(f"| {' + '.join(case)} | {len(stats['before'])} | {100 * np.mean(stats['hits']):.0f} % | "
+                    f"{error} | "
+                    f"{np.median(stats['before']):.2f} | {np.median(stats['after']):.2f} | {100 * at_floor:.0f} % | "
+                    f"{np.median(stats['steps']):.0f} | {np.median(stats['diag_cpu']):.2f} | "
+                    f"{np.median(stats['refine_cpu']):.1f} / {np.max(stats['refine_cpu']):.1f} | "
+                    f"{np.median(stats['identify']):.1f} | {stops} |")
+    print(f"False alarms on clean random helmets: {alarms} of {clean} (any significant finding); diagnose CPU "
+          f"median {np.median([t[0] for t in clean_times]):.2f} s\n")
+    print("| effects | sessions | among top two | median parameter error | rms/floor before | after refine --auto | "
+          "at most 1.2x after | steps (median) | diagnose CPU (s) | refine --auto CPU median / max (s) | identify (s) | "
+          "stop reasons |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
-
-
-def timing(sessions: int) -> None:
-    """Seconds of diagnose (clean and delayed sessions) and refine --auto at thesis length."""
-    print("| path | session | diagnose (s) | refine --auto (s) | rms/floor before -> after |")
-    print("|---|---|---|---|---|")
-    for path in ("fb", "ff"):
-        for k in range(sessions):
-            for effects in ([], ["delay:23"], ["resonance:3400,8,10"]):
-                r = run_session(path, 300 + k, effects, {}, refine=bool(effects),
-                                reference=any(e.startswith(FACTORS) for e in effects))
-                label = "+".join(effects) or "clean"
-                after = f"{r['before']:.2f} -> {r['after']:.2f}" if effects else f"{r['before']:.2f}"
-                refine_s = f"{r['t_refine']:.1f}" if "t_refine" in r else "-"
-                print(f"| {path} | {label} | {r['t_diagnose']:.2f} | {refine_s} | {after} |",
-                      flush=True)
 
 
 if __name__ == "__main__":

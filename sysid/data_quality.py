@@ -10,7 +10,8 @@ Used by the loader's warnings (``sysid.recordings``), by the diagnosis findings
   ``DC_ABSOLUTE``.
 - Clipping at any level (a converter at its rails or a preamplifier that
   flat-tops well below them): for each polarity the samples within ``TOP_WIDTH``
-  (relative) of the channel's extreme value form the top bin, the same width just
+  (relative) of the channel's extreme value, or ``NOISE_WIDTHS`` times its noise
+  RMS when that is wider (noise after the clipper scatters the tops), form the top bin, the same width just
   below it the next bin. A clipped channel piles its flat tops into the top bin, a
   spike in the histogram many times the next bin; an unclipped sine (arcsine
   density) gives a ratio of sqrt(2) + 1 = 2.4, noise much less. Samples at the
@@ -35,6 +36,17 @@ RAILS_16BIT = (-1.0, 32767 / 32768.0)
 # the top bin must hold to be a clipping spike rather than the peak of a sine.
 TOP_WIDTH = 0.005
 SPIKE_RATIO = 6.0
+# The top bin is at least NOISE_WIDTHS times the channel's noise RMS wide, at most MAX_WIDTH of the level.
+NOISE_WIDTHS = 8.0
+MAX_WIDTH = 0.2
+
+
+def _noise_rms(x: np.ndarray) -> float:
+    """Robust RMS of the broadband noise on x: the third difference removes any slow signal
+    (a 1 kHz tone is down 39 dB) and white noise comes out sqrt(20) times larger; MAD to RMS."""
+    if x.size < 8:
+        return 0.0
+    return float(np.median(np.abs(np.diff(x, 3))) / 0.6745 / np.sqrt(20.0))
 
 
 def dc_offset(x: np.ndarray, segments: int = 16) -> tuple[float, bool]:
@@ -70,12 +82,14 @@ def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT) -> 
         levels += [float(x[mask].max())] if np.any(x >= rails[1]) else []
     else:
         mask[:] = False
+    noise = _noise_rms(x)
     for sign in (1.0, -1.0):
         s = sign * x
         top = float(s.max()) if s.size else 0.0
         if top <= 0.0:
             continue
-        width = TOP_WIDTH * top
+        # Noise added after the clipper scatters the flat tops: the top bin must hold that scatter.
+        width = min(max(TOP_WIDTH * top, NOISE_WIDTHS * noise), MAX_WIDTH * top)
         in_top = s >= top - width
         n_top = int(np.count_nonzero(in_top))
         n_next = int(np.count_nonzero((s >= top - 2 * width) & ~in_top))

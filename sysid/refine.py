@@ -42,7 +42,7 @@ from .compare import Comparison, compare, fit_sinusoids
 from .corrections import corrected, recording_key, without_excluded
 from .diagnose import diagnose
 from .effect_spec import EffectSpec, ParameterSpec, parse_effect
-from .errors import IdentificationError
+from .errors import HelmetAncError, IdentificationError
 from .findings.data_quality import clipped_stretches_of, dc_offset_finding
 from .findings.delay import scan_delay
 from .findings.variation import clock_drift_finding
@@ -162,11 +162,12 @@ def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
             for r in prepared]
 
 
-def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s, extra_order: int = 2) -> Model:
+def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s, extra_order: int = 2,
+                min_order: int = 1) -> Model:
     recordings = _transformed(model, [noise, *sweeps], input_map, frequencies)
     options = options or REFIT_OPTIONS
     # Orders up to two above the model's: the added structure, not more order, should explain the data.
-    orders = tuple(n for n in options.orders if n <= model.order + extra_order) or (model.order,)
+    orders = tuple(n for n in options.orders if min_order <= n <= model.order + extra_order) or (model.order,)
     options = IdentificationOptions(**{**options.__dict__, "transient_s": transient_s, "orders": orders})
     return identify(recordings[0], recordings[1:], model.path, options).model
 
@@ -326,7 +327,9 @@ def _clock_drift(model, noise, sweeps, params, options, transient_s):
     # re-identified on the corrected recordings.
     ratio = model.clock_ratio * (1.0 + params["ppm"] * 1e-6)
     trial = _with(model, _core(model), clock_ratio=ratio)
-    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
+    # A data correction changes the data, not the dynamics: the refit keeps at least the model's order.
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s,
+                       min_order=model.order)
     refit = _with(trial, _core(core), identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"clock_ratio": ratio}
 
@@ -344,7 +347,8 @@ def _clipping(model, noise, sweeps, params, options, transient_s):
     if not excluded:
         raise IdentificationError("--add clipping: no recording clips")
     trial = _with(model, _core(model), excluded=excluded)
-    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s,
+                       min_order=model.order)
     refit = _with(trial, _core(core), identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"excluded_fraction": [round(f, 6) for f in fractions]}
 
@@ -488,7 +492,8 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             # At the floor in band; only a data correction (an offset at DC) can still lower the error.
             candidates = [f for f in candidates if f["effect"] in _CORRECTIONS]
             if not candidates:
-                stop_reason = "at the floor"
+                stop_reason = "at the floor" + (f"; effects that cannot be modelled: {', '.join(unmodellable)}"
+                                                if unmodellable else "")
                 break
         # The estimator choice is made once; the data keep showing input noise afterwards.
         if any(step.get("effect") == "input-noise" for step in model.history):
@@ -505,7 +510,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
             result = refine(model, noise, sweeps, spec, options, transient_s, current)
-        except IdentificationError as exc:
+        except HelmetAncError as exc:
             # An unstable or failed refit is reported as a rejected step, never returned.
             steps.append(RefinementStep(spec.kind, dict(spec.params), current.rms, current.rms, current.noise_floor,
                                         current.noise_floor, model.order, model.order, accepted=False,

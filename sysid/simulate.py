@@ -51,7 +51,10 @@ SIMULATED_EFFECTS = {
     # the 16-bit converter at 1.
     "clipping": (ParameterSpec("peak", 1.3, 1.0, 8.0), ParameterSpec("level", 1.0, 0.01, 1.0)),
     # Gain change below corner_hz from the start to the end of the session (a changing leak).
-    "time-variation": (ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0)),
+    # step 0: a linear change over the session; step k = 1 or 2: the change happens at once before sweep k
+    # (the helmet re-seated between recordings).
+    "time-variation": (ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0),
+                       ParameterSpec("step", 0, 0, 2, "int")),
     # Ear-channel clock error relative to the input channel (parts per million; positive = ear clock fast).
     "clock-drift": (ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
 }
@@ -156,7 +159,7 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
             u_long[u_clean.size:] = noise_gain * scipy.signal.sosfilt(lowpass, effect_rng.standard_normal(margin))
         y_long = plant.simulate(u_long)
         y_clean = _hidden_output_effects(hidden, y_long, u_clean.size, timeline[index], timeline[-1], spec.fs,
-                                         records, effect_rng)
+                                         records, effect_rng, index)
         u = _quantise16(u_clean + input_noise * rng.standard_normal(u_clean.size) + _dc(hidden, 0))
         y = _quantise16(y_clean + spec.output_noise * rng.standard_normal(y_clean.size) + _dc(hidden, 1))
         return u, y
@@ -256,8 +259,9 @@ def _dc(hidden: dict[str, dict], channel: int) -> float:
     return p["level"] if p is not None and p["channel"] == channel else 0.0
 
 
-def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng) -> np.ndarray:
-    """The ear signal of one recording (n samples from session sample ``start``) with the output-side effects."""
+def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng, index: int = 0) -> np.ndarray:
+    """The ear signal of recording ``index`` (0 noise, 1 and 2 the sweeps; n samples from session sample
+    ``start``) with the output-side effects."""
     if "clock-drift" in hidden:
         # The ear channel's clock runs ppm fast: it takes 1 + eps samples per input sample, so its
         # sample k is taken at input time k / (1 + eps) (a slow clock, ppm < 0, reads past the end).
@@ -270,7 +274,10 @@ def _hidden_output_effects(hidden, y_long, n, start, total, fs, records, rng) ->
         # The leak changes the gain below corner_hz linearly over the whole session.
         p = hidden["time-variation"]
         depth = 10.0 ** (p["change_db"] / 20.0) - 1.0
-        ramp = depth * ((start + np.arange(n)) / total - 0.5)
+        if p["step"]:
+            ramp = depth * float(index >= p["step"])
+        else:
+            ramp = depth * ((start + np.arange(n)) / total - 0.5)
         low = scipy.signal.sosfilt(scipy.signal.butter(2, p["corner_hz"], fs=fs, output="sos"), y)
         y = y + ramp * low
     if "clipping" in hidden:

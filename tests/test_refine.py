@@ -1,5 +1,7 @@
 """refine: the added structure brings the validation error to the noise floor and survives JSON."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -7,7 +9,7 @@ from helmet_anc.cli import main
 from sysid.compare import compare
 from sysid.errors import HelmetAncError
 from sysid.model import Model
-from sysid.refine import format_refinement, refine, refine_auto
+from sysid.refine import RefinementStep, format_refinement, refine, refine_auto
 from sysid.simulate import write_session
 
 from effect_sessions import TEST_REFIT, effect_case, random_factor, reference_case
@@ -185,3 +187,35 @@ class TestCommandLine:
         assert "periodic-disturbance" in (tmp_path / "s" / "truth.json").read_text()
         assert main(["simulate", str(tmp_path / "t"), "--effect", "wobble"]) == 2
         assert not (tmp_path / "t").exists()
+
+
+def test_steps_are_typed_records_with_a_json_round_trip():
+    session, model, result = refined("ff", 5, "delay:23", "delay")
+    step = result.step
+    assert isinstance(step, RefinementStep) and step.effect == "delay"
+    again = RefinementStep.from_dict(json.loads(json.dumps(step.to_dict())))
+    assert again == step
+    assert result.model.history[-1] == step.to_dict()
+
+
+@pytest.mark.parametrize("effects", [("delay:23", "input-nonlinearity:-35,-35"),
+                                     ("dc-offset:0.01", "clock-drift:40", "periodic-disturbance:50,2,1e-3")])
+def test_auto_is_monotone_bounded_and_says_why_it_stopped(effects):
+    session, model = effect_case("ff", 6, effects)
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    text = format_refinement(auto.steps, auto.stop_reason)
+    assert len(auto.steps) <= 8
+    kept = [s for s in auto.steps if s.accepted]
+    for step in kept:
+        if step.effect != "dc-offset":  # an offset lives at DC, outside the validation band
+            assert step.rms_after < step.rms_before, text
+    for i, step in enumerate(auto.steps):
+        if not step.accepted:  # a rejected effect stays rejected
+            assert step.effect not in [later.effect for later in auto.steps[i + 1:]], text
+    keys = [(s.effect, json.dumps(s.params, sort_keys=True)) for s in auto.steps]
+    assert len(keys) == len(set(keys)), text
+    assert auto.stop_reason.split(";")[0] in ("at the floor", "nothing left that lowers the error") \
+        or auto.stop_reason.startswith("effects that cannot be modelled"), text
+    assert auto.after.ratio <= 1.2, text
+    assert [h["effect"] for h in auto.model.history] == [s.effect for s in kept]
+    assert f"stopped: {auto.stop_reason}" in text

@@ -19,9 +19,9 @@ from . import DiagnosisContext, finding
 __all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of"]
 
 # The ear offset is read in up to the first LEAD_S of a sweep recording where the input is SILENT
-# (relative to its peak) or less.
+# (relative to its RMS) or less.
 LEAD_S = 0.5
-SILENT = 1e-3
+SILENT = 0.05
 # Margins around a clipped run left out of identification and validation: an ear sample that
 # clipped spoils itself only; a clipped input misleads the model for its impulse response.
 EAR_MARGIN_S = 0.002
@@ -48,7 +48,8 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
     channels += [(s.path, "input", *dc_offset(s.u)) for s in ctx.sweeps]
     leads = []
     for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
-        loud = np.flatnonzero(np.abs(sweep.u) > SILENT * np.max(np.abs(sweep.u)))
+        level = np.abs(sweep.u - np.median(sweep.u))
+        loud = np.flatnonzero(level > SILENT * np.sqrt(np.mean(level**2)))
         lead = min(int(loud[0]) if loud.size else 0, int(round(LEAD_S * ctx.fs)))
         if lead >= 64:
             residual = sweep.y[:lead] - record["predicted"][:lead]

@@ -23,6 +23,7 @@ from .delay import refit_rms
 __all__ = ["under_modelled_finding", "worst_bands", "START_Q"]
 
 GAIN = EXPLAINS_GAIN
+NO_IN_BAND_ERROR = ("dc-offset", "time-variation")
 START_Q = 3.0
 
 
@@ -35,7 +36,8 @@ def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
 
 def under_modelled_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
-    explained = any(f["significant"] for f in ctx.cache.get("findings", ()))
+    # An offset (at DC) or a change between recordings explains no in-band error of the model.
+    explained = any(f["significant"] and f["effect"] not in NO_IN_BAND_ERROR for f in ctx.cache.get("findings", ()))
     if ctx.excess < EXCESS or explained:
         reason = "the model is at the noise floor" if ctx.excess < EXCESS else "a named effect explains the error"
         return finding("under-modelled", False, 0.0, {"order": model.order}, f"not tested: {reason}", "none")

@@ -19,9 +19,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
+from ..compare import third_octave_bands
+from ..validation import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding
 
-__all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding"]
+__all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding", "recording_change",
+           "recording_levels"]
 
 SEGMENTS = 8
 NPERSEG = 4410  # 10 Hz resolution: about 28 bins below 300 Hz for the time-variation ratio
@@ -29,6 +32,11 @@ NPERSEG = 4410  # 10 Hz resolution: about 28 bins below 300 Hz for the time-vari
 DRIFT_PPM, DRIFT_T = 3.0, 10.0
 # Time variation: halves differ this many times more than interleaved segments (median over bins).
 VARIATION_RATIO = 4.0
+# Between recordings: the low band (below LOW_HZ) moves against the band above by CHANGE_DB and
+# CHANGE_T standard errors of the noise recording's levels.
+LOW_HZ = 300.0
+CHANGE_DB = 0.3
+CHANGE_T = 6.0
 
 
 def segment_responses(ctx: DiagnosisContext):
@@ -88,7 +96,84 @@ def clock_drift_finding(ctx: DiagnosisContext) -> dict:
                    {"segment_delays": [float(d) for d in delays], "t_statistic": t_stat})
 
 
+def recording_levels(ctx: DiagnosisContext) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+    """(band centres Hz, response level in dB per band for each recording, standard error of the noise
+    recording's levels in dB) on third-octave bands 20 Hz - 4 kHz.
+
+    The noise recording's level is the mean over its segments' H1 (``segment_responses``),
+    its standard error the spread of the segments over sqrt(SEGMENTS); a sweep's is the median
+    over the band's DFT bins of |Y/U| where the sweep excites the band (|U| within 20 dB of its
+    largest bin there).
+    """
+    f, H, coherence, _ = segment_responses(ctx)
+    segment_db = 20 * np.log10(np.abs(H) + 1e-300)
+    centres, noise_level, noise_error, sweep_levels = [], [], [], {s.path: [] for s in ctx.sweeps}
+    spectra = []
+    first = int(round(SKIP_S * ctx.fs))
+    for sweep in ctx.sweeps:
+        U, Y = np.fft.rfft(sweep.u[first:]), np.fft.rfft(sweep.y[first:])
+        spectra.append((np.fft.rfftfreq(sweep.u.size - first, 1 / ctx.fs), U, Y))
+    for centre, low, high in third_octave_bands(*VALIDATION_BAND):
+        use = (f >= low) & (f < high) & np.all(coherence > 0.5, axis=0)
+        if np.count_nonzero(use) < 1:
+            continue
+        levels = segment_db[:, use].mean(axis=1)
+        centres.append(centre)
+        noise_level.append(levels.mean())
+        noise_error.append(levels.std(ddof=1) / np.sqrt(levels.size))
+        for sweep, (fs_bins, U, Y) in zip(ctx.sweeps, spectra):
+            inside = (fs_bins >= low) & (fs_bins < high)
+            strong = inside & (np.abs(U) > 0.1 * np.max(np.abs(U[inside]), initial=0.0))
+            sweep_levels[sweep.path].append(float(np.median(20 * np.log10(np.abs(Y[strong] / U[strong]) + 1e-300)))
+                                            if np.any(strong) else np.nan)
+    levels = {ctx.noise.path: np.array(noise_level), **{k: np.array(v) for k, v in sweep_levels.items()}}
+    return np.array(centres), levels, np.array(noise_error)
+
+
+def recording_change(ctx: DiagnosisContext) -> dict:
+    """Whether the path changed between recordings: noise recording vs each sweep, sweep 1 vs sweep 2.
+
+    A changed fit or leak moves the low band (below ``LOW_HZ``) against the band above it
+    (effects.md: leak changes lie mostly below 200-300 Hz). Comparing the shape (low band
+    minus mid band, in dB) makes the test blind to a broadband gain bias of one estimate
+    (the H1 bias of input noise, a level-dependent gain). Each pair's shape difference
+    must exceed ``CHANGE_DB`` and ``CHANGE_T`` standard errors; the recording that differs
+    from both others is the one that disagrees.
+    """
+    centres, levels, error = recording_levels(ctx)
+    low, mid = centres < LOW_HZ, (centres >= LOW_HZ) & (centres <= 2000.0)
+    names = list(levels)
+    if np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
+        return {"changed": False, "pairs": {}, "odd_one_out": None, "change_db": 0.0}
+
+    def shape(a, b):
+        d = levels[a] - levels[b]
+        return float(np.nanmedian(d[low]) - np.nanmedian(d[mid]))
+
+    noise_error = float(np.sqrt(np.mean(error[low] ** 2) / np.count_nonzero(low) + np.mean(error[mid] ** 2)
+                                / np.count_nonzero(mid)))
+    pairs = {}
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            value = shape(a, b)
+            # Sweep-to-sweep shapes carry hardly any estimation noise; the noise recording's does.
+            spread = noise_error if names[0] in (a, b) else 0.0
+            pairs[(a, b)] = (value, abs(value) >= max(CHANGE_DB, CHANGE_T * spread))
+    odd = None
+    for name in names:
+        involved = [changed for pair, (_, changed) in pairs.items() if name in pair]
+        others = [changed for pair, (_, changed) in pairs.items() if name not in pair]
+        if all(involved) and not any(others):
+            odd = name
+    changed = odd is not None or all(c for _, c in pairs.values())
+    change = max((abs(v) for v, c in pairs.values() if c), default=max(abs(v) for v, _ in pairs.values()))
+    return {"changed": changed, "odd_one_out": odd, "change_db": change,
+            "pairs": {f"{a} vs {b}": round(v, 3) for (a, b), (v, _) in pairs.items()}}
+
+
 def time_variation_finding(ctx: DiagnosisContext) -> dict:
+    """The path changing inside the noise recording, or between recordings (``recording_change``)."""
+    across = recording_change(ctx)
     f, H, coherence, _ = segment_responses(ctx)
     level = 20 * np.log10(np.abs(H) + 1e-300)
     half = SEGMENTS // 2
@@ -105,8 +190,21 @@ def time_variation_finding(ctx: DiagnosisContext) -> dict:
         results[name] = (ratio, float(np.sqrt(np.mean(halves[use] ** 2))))
     name = max(results, key=lambda key: results[key][0])
     ratio, change_db = results[name]
-    significant = ratio >= VARIATION_RATIO
+    # A change must also matter: below CHANGE_DB it moves the error of no model measurably.
+    significant = ratio >= VARIATION_RATIO and change_db >= CHANGE_DB
     below = "below 300 Hz" if name == "low" else "across the band"
+    if across["changed"] and not significant:
+        odd = across["odd_one_out"]
+        agree = [r.path for r in (ctx.noise, *ctx.sweeps) if r.path != odd]
+        who = (f"{odd} disagrees with {' and '.join(agree)}" if odd else "all three recordings disagree")
+        return finding("time-variation", True, max(across["change_db"] / CHANGE_DB, 1.0),
+                       {"change_db": across["change_db"], "band": f"below {LOW_HZ:.0f} Hz against the band above",
+                        "recording": odd, "agreeing": agree if odd else []},
+                       f"the response below {LOW_HZ:.0f} Hz changed by {across['change_db']:.2f} dB between "
+                       f"recordings: {who} (the helmet was re-seated or its leak changed between them)",
+                       (f"identify from the recordings that agree ({', '.join(agree)}) or re-record {odd} with the "
+                        "helmet as in the others" if odd else "re-record all three with the helmet fixed"),
+                       {"pairs_db": across["pairs"], "ratio_low": results["low"][0]})
     explanation = (f"the response {below} changes by {change_db:.2f} dB RMS between the first and second half of the "
                    f"noise recording ({ratio:.1f}x the change between interleaved segments): the helmet's fit or "
                    "leak changed while recording"
