@@ -14,12 +14,13 @@ import importlib.machinery
 import importlib.util
 import os
 import re
-import shutil
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from sysid.files import staged_directory
 
 from .errors import BuildError
 
@@ -107,22 +108,18 @@ def build_host(name: str, header: str, source: str) -> HostFilter:
     root = cache_dir()
     final = root / key
     if not any(final.glob(f"{module_name}*.so")) and not any(final.glob(f"{module_name}*.pyd")):
-        scratch = Path(tempfile.mkdtemp(prefix=f".{key}.", dir=root))
         try:
-            (scratch / f"{name}_filter.h").write_text(header, encoding="utf-8")
-            (scratch / f"{name}_filter.c").write_text(source, encoding="utf-8")
-            ffi = cffi.FFI()
-            ffi.cdef(_cdef(name, header))
-            ffi.set_source(module_name, f'#include "{name}_filter.h"', sources=[str(scratch / f"{name}_filter.c")],
-                           include_dirs=[str(scratch)], extra_compile_args=flags)
-            ffi.compile(tmpdir=str(scratch), verbose=False)
-            try:
-                os.replace(scratch, final)
-            except OSError:
-                # Another process finished the same build first; use theirs.
-                shutil.rmtree(scratch, ignore_errors=True)
+            # Built in a staging folder renamed into the cache (sysid.files.staged_directory): an
+            # interrupted or failed build leaves nothing; a concurrent identical build wins harmlessly.
+            with staged_directory(final) as scratch:
+                (scratch / f"{name}_filter.h").write_text(header, encoding="utf-8")
+                (scratch / f"{name}_filter.c").write_text(source, encoding="utf-8")
+                ffi = cffi.FFI()
+                ffi.cdef(_cdef(name, header))
+                ffi.set_source(module_name, f'#include "{name}_filter.h"', sources=[str(scratch / f"{name}_filter.c")],
+                               include_dirs=[str(scratch)], extra_compile_args=flags)
+                ffi.compile(tmpdir=str(scratch), verbose=False)
         except Exception as exc:  # noqa: BLE001 - compiler failures come in many types
-            shutil.rmtree(scratch, ignore_errors=True)
             message = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
             raise BuildError(f"host build of {name}_filter.c failed: {message}") from None
     library = next(iter(sorted(final.glob(f"{module_name}*.so")) + sorted(final.glob(f"{module_name}*.pyd"))))

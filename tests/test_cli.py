@@ -85,7 +85,8 @@ class TestBadInput:
 
     def test_too_short_after_transient(self, session_files, tmp_path, capsys):
         rng = np.random.default_rng(0)
-        write_wav16(tmp_path / "short.wav", 0.1 * rng.standard_normal(3 * 44100 + 1000), np.zeros(3 * 44100 + 1000), 44100)
+        u = 0.1 * rng.standard_normal(3 * 44100 + 1000)
+        write_wav16(tmp_path / "short.wav", u, 0.5 * u, 44100)
         code, _, err = _run(capsys, *_identify_args(dict(session_files, noise=tmp_path / "short.wav"), tmp_path / "m.json"))
         _assert_one_line_error(code, err, "short.wav: 0.0227 s after the transient is shorter than one averaging segment")
 
