@@ -22,7 +22,10 @@ void anc_init(anc_runtime *rt, anc_controller_fn controller, void *controller_co
     for (i = 0; i < ANC_BLOCK; ++i) {
         rt->played[i] = 0;
     }
-    rt->ready = 0u;
+    for (h = 0; h < 2u; ++h) {
+        rt->captured[h] = 0u;
+        rt->serviced[h] = 0u;
+    }
     rt->overruns = 0u;
     rt->controller = controller;
     rt->controller_context = controller_context;
@@ -31,6 +34,10 @@ void anc_init(anc_runtime *rt, anc_controller_fn controller, void *controller_co
 void anc_process_block(anc_runtime *rt, const int16_t *chin, const int16_t *ear, int16_t *speaker)
 {
     size_t i;
+    /* What the DMA just played from this half, while chin and ear were captured. */
+    for (i = 0; i < ANC_BLOCK; ++i) {
+        rt->played[i] = speaker[i];
+    }
     /* Internal model: what the ear would hear from the speaker alone. */
     fb_q15_process(&rt->fb, rt->played, rt->ear_model, ANC_BLOCK);
     for (i = 0; i < ANC_BLOCK; ++i) {
@@ -44,30 +51,29 @@ void anc_process_block(anc_runtime *rt, const int16_t *chin, const int16_t *ear,
             speaker[i] = 0;
         }
     }
-    /* This block is played while the next one is captured. */
-    for (i = 0; i < ANC_BLOCK; ++i) {
-        rt->played[i] = speaker[i];
-    }
 }
 
+/* Interrupt side: writes captured[h] and overruns only (see anc_runtime.h). */
 void anc_dma_block_done(anc_runtime *rt, unsigned half)
 {
-    uint32_t bit = 1u << (half & 1u);
-    if ((rt->ready & bit) != 0u) {
-        ++rt->overruns;
+    unsigned h = half & 1u;
+    uint32_t count = rt->captured[h];
+    if (count != rt->serviced[h]) {
+        rt->overruns = rt->overruns + 1u;
     }
-    rt->ready |= bit;
+    rt->captured[h] = count + 1u;
 }
 
+/* Main-loop side: writes serviced[h] only. */
 int anc_service(anc_runtime *rt)
 {
     unsigned h;
     for (h = 0; h < 2u; ++h) {
-        uint32_t bit = 1u << h;
-        if ((rt->ready & bit) != 0u) {
-            /* The speaker half to fill is the one the DMA plays next: the other half. */
-            anc_process_block(rt, rt->chin[h], rt->ear[h], rt->speaker[h ^ 1u]);
-            rt->ready &= ~bit;
+        uint32_t count = rt->captured[h];
+        if (count != rt->serviced[h]) {
+            /* Fill the half that just finished playing: the DMA is now on half h ^ 1. */
+            anc_process_block(rt, rt->chin[h], rt->ear[h], rt->speaker[h]);
+            rt->serviced[h] = count;
             return 1;
         }
     }

@@ -6,12 +6,24 @@
  * being captured (chin and ear microphones) and played (speaker), the CPU works
  * on the other half. anc_dma_block_done() (from the DMA interrupt) marks a captured
  * half ready; anc_service() (main loop) processes it with anc_process_block(),
- * which must finish within one block period.
+ * which must finish within one block period. When half h completes, the DMA moves
+ * on to half h ^ 1 (capturing and playing it), so the speaker half the CPU may
+ * fill is speaker[h], the one just played: it is played again two block periods
+ * later. Input-to-speaker latency is therefore two blocks (2 * ANC_BLOCK samples).
+ *
+ * Interrupt/main-loop sharing (single writer per variable, no read-modify-write
+ * of shared data): for each half h the interrupt alone writes captured[h] (a
+ * count of completed captures) and overruns; the main loop alone writes
+ * serviced[h]. Half h is ready when captured[h] != serviced[h]. Each is an
+ * aligned 32-bit word, read and written atomically by one load or store on a
+ * Cortex-M; volatile keeps the compiler from caching them. The interrupt counts
+ * an overrun when it completes half h again before the main loop serviced the
+ * previous capture (the main loop then processes the newest data once).
  *
  * Per block of ANC_BLOCK samples:
  *   ear_model[n] = G_fb * played[n]   the FB model driven by what the speaker played
  *                                     while this block was captured (the block the
- *                                     runtime computed one period earlier);
+ *                                     runtime computed two periods earlier);
  *   d_hat[n]     = ear[n] - ear_model[n]   internal-model disturbance observer:
  *                                     the ear signal not caused by the speaker;
  *   ff_pred[n]   = G_ff * chin[n]     the ear noise predicted from the chin microphone;
@@ -45,8 +57,9 @@ typedef struct {
     int16_t ear_model[ANC_BLOCK];
     int16_t d_hat[ANC_BLOCK];
     int16_t ff_pred[ANC_BLOCK];
-    volatile uint32_t ready;        /* bit h: half h captured and not yet processed */
-    uint32_t overruns;              /* halves captured again before they were processed */
+    volatile uint32_t captured[2];  /* written by the interrupt only: captures of half h completed */
+    volatile uint32_t serviced[2];  /* written by the main loop only: captures of half h processed */
+    volatile uint32_t overruns;     /* written by the interrupt only: halves captured again unprocessed */
     anc_controller_fn controller;   /* NULL: the speaker stays silent (observer only) */
     void *controller_context;
 } anc_runtime;
@@ -54,6 +67,8 @@ typedef struct {
 void anc_init(anc_runtime *rt, anc_controller_fn controller, void *controller_context);
 void anc_dma_block_done(anc_runtime *rt, unsigned half);
 int anc_service(anc_runtime *rt);
+/* speaker: on entry the samples played while chin/ear were captured, on return
+ * the samples to play next in this half. */
 void anc_process_block(anc_runtime *rt, const int16_t *chin, const int16_t *ear, int16_t *speaker);
 
 #endif /* ANC_RUNTIME_H */
