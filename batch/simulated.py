@@ -21,10 +21,12 @@ __all__ = ["write_simulated_campaign"]
 
 
 def write_simulated_campaign(root, helmets: int, heads: int, path: str = "fb", seed: int = 0,
-                             spread: RiderSpread = RiderSpread(), **spec_overrides) -> dict[str, Model]:
+                             spread: RiderSpread = RiderSpread(), latency: bool = True,
+                             **spec_overrides) -> dict[str, Model]:
     """Write helmets x heads sessions under root; return {session folder (relative): true plant}.
 
-    ``spec_overrides`` replace ``SessionSpec`` fields (e.g. ``noise_duration=6.0``).
+    ``latency=False`` drops the drawn plants' pure delay; ``spec_overrides`` replace
+    ``SessionSpec`` fields (e.g. ``noise_duration=6.0``).
     """
     root = Path(root)
     truths = {}
@@ -32,6 +34,8 @@ def write_simulated_campaign(root, helmets: int, heads: int, path: str = "fb", s
         helmet = random_plant(seed + h, path)
         for k in range(heads):
             variant = rider_variant(helmet.model, seed=1000 * (seed + h) + k, spread=spread)
+            if not latency:
+                variant = Model.from_dict(dict(variant.to_dict(), delay=0))
             fields = {"path": path, "seed": 1000 * (seed + h) + k, "fs": helmet.fs, "output_noise": helmet.sensor_noise}
             fields.update(spec_overrides)
             session = simulate_session(SessionSpec(**fields), plant=variant)

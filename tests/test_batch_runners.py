@@ -3,8 +3,10 @@ bad sessions are isolated; a killed worker's task runs again; a rerun resumes.""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
+import shutil
 import signal
 import threading
 import time
@@ -13,6 +15,7 @@ import pytest
 
 from batch import run_batch, write_simulated_campaign
 from batch.outputs import OutputLayout
+from sysid.errors import HelmetAncError
 from tests.batch_sessions import BATCH_OPTIONS, SHORT_SESSION, data_columns
 
 distributed = pytest.importorskip("distributed")
@@ -78,6 +81,7 @@ class TestDask:
             assert (result.layout.nominal(f"{key[0]}_{key[1]}").read_bytes()
                     == local_run.layout.nominal(f"{key[0]}_{key[1]}").read_bytes())
 
+    @pytest.mark.slow
     def test_worker_killed_during_a_task_and_every_session_done_once(self, campaign, local_run, tmp_path):
         with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                 distributed.Client(cluster) as client:
@@ -135,25 +139,38 @@ class TestResume:
     def test_rerun_skips_finished_and_redoes_changed_sessions(self, campaign, local_run, tmp_path):
         root, _ = campaign
         sessions = tmp_path / "sessions"
-        for row in local_run.rows:
-            folder = f"{row['helmet']}/{row['head']}/fb"
-            (sessions / folder).mkdir(parents=True)
-            for name in ("noise.wav", "sweep1.wav", "sweep2.wav"):
-                (sessions / folder / name).write_bytes((root / folder / name).read_bytes())
+        shutil.copytree(root, sessions)
         out = tmp_path / "out"
-        first = run_batch(sessions, out, workers=1, options=BATCH_OPTIONS)
-        assert first.resumed == 0
-        stamps = {r["session"]: first.layout.result(r["session"]).stat().st_mtime_ns for r in first.rows}
+        shutil.copytree(local_run.layout.root, out)
+        stamps = {r["session"]: (out / "results" / f"{r['session']}.json").stat().st_mtime_ns for r in local_run.rows}
+        with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+                distributed.Client(cluster) as client:
+            second = run_batch(sessions, out, scheduler=client, options=BATCH_OPTIONS)
+            assert second.resumed == 4
+            assert {r["session"]: second.layout.result(r["session"]).stat().st_mtime_ns for r in second.rows} == stamps
+            assert [data_columns(r) for r in second.rows] == [data_columns(r) for r in local_run.rows]
 
-        second = run_batch(sessions, out, workers=1, options=BATCH_OPTIONS)
-        assert second.resumed == 4
-        assert {r["session"]: second.layout.result(r["session"]).stat().st_mtime_ns for r in second.rows} == stamps
-        assert [data_columns(r) for r in second.rows] == [data_columns(r) for r in first.rows]
-
-        # A changed recording is redone; the others are not.
-        (sessions / "H1/head0/fb/sweep2.wav").write_bytes((root / "H1/head1/fb/sweep2.wav").read_bytes())
-        third = run_batch(sessions, out, workers=1, options=BATCH_OPTIONS)
-        redone = [r["session"] for r in third.rows if not r["resumed"]]
-        assert redone == ["H1_head0_fb"]
+            # A changed recording is redone; the others are not.
+            (sessions / "H1/head0/fb/sweep2.wav").write_bytes((root / "H1/head1/fb/sweep2.wav").read_bytes())
+            third = run_batch(sessions, out, scheduler=client, options=BATCH_OPTIONS)
+        assert [r["session"] for r in third.rows if not r["resumed"]] == ["H1_head0_fb"]
         changed = next(r for r in third.rows if r["session"] == "H1_head0_fb")
-        assert changed["input_hash"] != next(r for r in first.rows if r["session"] == "H1_head0_fb")["input_hash"]
+        assert changed["input_hash"] != next(r for r in local_run.rows if r["session"] == "H1_head0_fb")["input_hash"]
+
+    def test_other_options_redo_everything(self, campaign, local_run, tmp_path):
+        out = tmp_path / "out"
+        shutil.copytree(local_run.layout.root, out)
+        options = dataclasses.replace(BATCH_OPTIONS, orders=tuple(range(1, 5)))
+        with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+                distributed.Client(cluster) as client:
+            result = run_batch(campaign[0], out, scheduler=client, options=options)
+        assert result.resumed == 0
+        assert all(r["order"] <= 4 for r in result.rows if r["status"] == "ok")
+
+
+class TestOutputFolder:
+    def test_foreign_folder_refused_before_any_work(self, campaign, tmp_path):
+        (tmp_path / "mine.txt").write_text("not a batch output")
+        with pytest.raises(HelmetAncError, match="not empty and was not written by helmet-anc batch"):
+            run_batch(campaign[0], tmp_path, workers=1, options=BATCH_OPTIONS)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
