@@ -23,10 +23,30 @@
 #ifndef HARNESS_BLOCK
 #define HARNESS_BLOCK 32u
 #endif
-#define HARNESS_MAX_SAMPLES 262144u
+/* Longest input the harness takes (the buffers are static: no heap on the board).
+ * A longer file is refused, never truncated. */
+#ifndef HARNESS_MAX_SAMPLES
+#define HARNESS_MAX_SAMPLES 262144
+#endif
+#define HARNESS_STR2(x) #x
+#define HARNESS_STR(x) HARNESS_STR2(x)
+
+#if defined(HARNESS_Q15) || defined(HARNESS_F32)
+/* Refuse input beyond HARNESS_MAX_SAMPLES (the read buffer holds one sample more to detect it). */
+static int too_long(const char *file, size_t n)
+{
+    if (n <= HARNESS_MAX_SAMPLES) {
+        return 0;
+    }
+    board_io_print(file);
+    board_io_print(": longer than " HARNESS_STR(HARNESS_MAX_SAMPLES)
+                   " samples; split it or rebuild with -DHARNESS_MAX_SAMPLES=<n>\n");
+    return 1;
+}
+#endif
 
 #if defined(HARNESS_Q15)
-static int16_t in_q15[HARNESS_MAX_SAMPLES];
+static int16_t in_q15[HARNESS_MAX_SAMPLES + 1u];
 static int16_t out_q15[HARNESS_MAX_SAMPLES];
 
 static int run_q15(void)
@@ -39,6 +59,9 @@ static int run_q15(void)
         return 1;
     }
     n = (size_t)bytes / sizeof in_q15[0];
+    if (too_long("in_q15.raw", n)) {
+        return 8;
+    }
     CAT(FILTER_NAME, q15_init)(&state);
     for (done = 0; done < n; done += m) {
         m = (n - done < HARNESS_BLOCK) ? n - done : HARNESS_BLOCK;
@@ -49,7 +72,7 @@ static int run_q15(void)
 #endif
 
 #if defined(HARNESS_F32)
-static float in_f32[HARNESS_MAX_SAMPLES];
+static float in_f32[HARNESS_MAX_SAMPLES + 1u];
 static float out_f32[HARNESS_MAX_SAMPLES];
 
 static int run_f32(void)
@@ -62,6 +85,9 @@ static int run_f32(void)
         return 1;
     }
     n = (size_t)bytes / sizeof in_f32[0];
+    if (too_long("in_f32.raw", n)) {
+        return 8;
+    }
     CAT(FILTER_NAME, f32_init)(&state);
     for (done = 0; done < n; done += m) {
         m = (n - done < HARNESS_BLOCK) ? n - done : HARNESS_BLOCK;

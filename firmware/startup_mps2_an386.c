@@ -36,8 +36,16 @@ void Fault_Handler(void)
     board_io_exit(3);
 }
 
+/* One vector-table word: the initial stack pointer (an object address) or a handler.
+ * A union keeps both as ISO C (-Wpedantic forbids converting between object and
+ * function pointers). */
+typedef union {
+    uint32_t *stack;
+    void (*handler)(void);
+} vector_entry;
+
 /* Initial stack pointer, reset, NMI, hard fault, MPU/bus/usage faults. */
-__attribute__((section(".isr_vector"), used)) void (*const vector_table[7])(void) = {
-    (void (*)(void))(&__stack_top__), Reset_Handler, Fault_Handler, Fault_Handler,
-    Fault_Handler, Fault_Handler, Fault_Handler,
+__attribute__((section(".isr_vector"), used)) const vector_entry vector_table[7] = {
+    {.stack = &__stack_top__}, {.handler = Reset_Handler}, {.handler = Fault_Handler}, {.handler = Fault_Handler},
+    {.handler = Fault_Handler}, {.handler = Fault_Handler}, {.handler = Fault_Handler},
 };

@@ -14,7 +14,7 @@ import scipy.signal
 from sysid.model import Model
 from sysid.plants import appendix_a_model
 
-__all__ = ["FS", "appendix_a_model", "have", "log_sweep", "model_sweeps", "random_stable_model"]
+__all__ = ["CMSIS_DECLARATIONS", "FS", "appendix_a_model", "have", "log_sweep", "model_sweeps", "random_stable_model"]
 
 FS = 44100.0
 
@@ -59,3 +59,35 @@ def random_stable_model(seed: int, order: int, path: str = "fb", delay: int = 0,
 
 def have(tool: str) -> bool:
     return shutil.which(tool) is not None
+
+
+# Declarations of the CMSIS-DSP API the cmsis target calls (names, types and
+# signatures as documented for CMSIS-DSP 1.x), enough to compile the target's C.
+CMSIS_DECLARATIONS = """
+#ifndef ARM_MATH_H
+#define ARM_MATH_H
+#include <stdint.h>
+typedef int16_t q15_t;
+typedef int32_t q31_t;
+typedef int64_t q63_t;
+typedef float float32_t;
+typedef struct { int8_t numStages; q15_t *pState; const q15_t *pCoeffs; int8_t postShift; } arm_biquad_casd_df1_inst_q15;
+typedef struct { uint8_t numStages; q63_t *pState; const q31_t *pCoeffs; uint8_t postShift; } arm_biquad_cas_df1_32x64_ins_q31;
+void arm_biquad_cascade_df1_init_q15(arm_biquad_casd_df1_inst_q15 *S, uint8_t numStages, const q15_t *pCoeffs,
+                                     q15_t *pState, int8_t postShift);
+void arm_biquad_cascade_df1_q15(const arm_biquad_casd_df1_inst_q15 *S, const q15_t *pSrc, q15_t *pDst, uint32_t blockSize);
+void arm_biquad_cas_df1_32x64_init_q31(arm_biquad_cas_df1_32x64_ins_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                       q63_t *pState, uint8_t postShift);
+void arm_biquad_cas_df1_32x64_q31(const arm_biquad_cas_df1_32x64_ins_q31 *S, const q31_t *pSrc, q31_t *pDst,
+                                  uint32_t blockSize);
+typedef struct { uint32_t numStages; q31_t *pState; const q31_t *pCoeffs; uint8_t postShift; } arm_biquad_casd_df1_inst_q31;
+typedef struct { uint8_t numStages; float32_t *pState; const float32_t *pCoeffs; } arm_biquad_cascade_df2T_instance_f32;
+void arm_biquad_cascade_df1_init_q31(arm_biquad_casd_df1_inst_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                     q31_t *pState, int8_t postShift);
+void arm_biquad_cascade_df1_q31(const arm_biquad_casd_df1_inst_q31 *S, const q31_t *pSrc, q31_t *pDst, uint32_t blockSize);
+void arm_biquad_cascade_df2T_init_f32(arm_biquad_cascade_df2T_instance_f32 *S, uint8_t numStages,
+                                      const float32_t *pCoeffs, float32_t *pState);
+void arm_biquad_cascade_df2T_f32(const arm_biquad_cascade_df2T_instance_f32 *S, const float32_t *pSrc,
+                                 float32_t *pDst, uint32_t blockSize);
+#endif
+"""
