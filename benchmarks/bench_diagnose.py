@@ -24,46 +24,10 @@ from sysid.diagnose import diagnose
 from sysid.identify import IdentificationOptions, identify
 from sysid.random_plant import random_session
 from sysid.refine import refine_auto
+from sysid.simulate import random_effect
 
 SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
 OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 60)), refine_seconds=3.0)
-
-
-def random_effect(kind: str, rng) -> tuple[str, str | None, float | None]:
-    """(spec, parameter checked, its true value) with parameters drawn from effects.md's ranges."""
-    if kind == "delay":
-        d = int(rng.integers(5, 50))
-        return f"delay:{d}", "samples", d
-    if kind == "periodic-disturbance":
-        f = float(rng.choice([50.0, 60.0, 41.7]))
-        return f"periodic-disturbance:{f},3,{rng.uniform(3e-4, 2e-3):.2e}", "frequencies_hz", f
-    if kind == "input-nonlinearity":
-        h2 = float(rng.uniform(-45, -30))
-        return f"input-nonlinearity:{h2:.1f},{rng.uniform(-45, -30):.1f}", "h2_db", h2
-    if kind == "input-noise":
-        snr = float(rng.uniform(3, 12))
-        return f"input-noise:{snr:.1f}", "input_snr_db", snr
-    if kind == "clock-drift":
-        ppm = float(rng.uniform(20, 100) * rng.choice([-1, 1]))
-        return f"clock-drift:{ppm:.1f}", "ppm", ppm
-    if kind == "time-variation":
-        return f"time-variation:{rng.uniform(2, 5) * rng.choice([-1, 1]):.1f},200,{int(rng.integers(0, 3))}", None, None
-    if kind == "dc-offset":
-        level = float(rng.uniform(0.003, 0.03) * rng.choice([-1, 1]))
-        return f"dc-offset:{level:.4f}", "ear_offset_fs", level
-    if kind == "clipping":
-        return f"clipping:{rng.uniform(1.1, 1.6):.2f},{rng.choice([1.0, rng.uniform(0.1, 0.6)]):.2f}", None, None
-    if kind == "resonance":
-        f0 = float(np.exp(rng.uniform(np.log(60.0), np.log(3600.0))))
-        return (f"resonance:{f0:.1f},{rng.uniform(3, 15):.2f},{rng.uniform(6, 14) * rng.choice([1, 1, -1]):.2f}",
-                "f0_hz", f0)
-    if kind == "highpass":
-        corner = float(rng.uniform(10.0, 80.0))
-        return f"highpass:{corner:.1f},{int(rng.integers(1, 3))}", "corner_hz", corner
-    if kind == "lowpass":
-        corner = float(np.exp(rng.uniform(np.log(1000.0), np.log(16000.0))))
-        return f"lowpass:{corner:.0f},{int(rng.integers(1, 3))}", "corner_hz", corner
-    raise ValueError(kind)
 
 
 KINDS = ["delay", "resonance", "highpass", "lowpass", "periodic-disturbance", "input-nonlinearity", "input-noise",

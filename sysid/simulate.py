@@ -28,7 +28,7 @@ from .recordings import Recording, write_wav16
 from .structures import factor_coefficients, series, tf_to_statespace
 
 __all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
-           "SIMULATED_EFFECTS"]
+           "SIMULATED_EFFECTS", "random_effect"]
 
 TRUTH_FORMAT = "helmet-anc/truth@1"
 
@@ -307,3 +307,41 @@ def write_session(session: Session, outdir) -> dict[str, Path]:
         atomic_write(files[key], lambda tmp, r=recording: write_wav16(tmp, r.u, r.y, r.fs))
     atomic_write_text(files["truth"], json.dumps(session.truth, indent=2) + "\n")
     return files
+
+
+def random_effect(kind: str, rng: np.random.Generator) -> tuple[str, str | None, float | None]:
+    """A hidden effect with random parameters in effects.md's ranges: (spec for ``simulate_session``,
+    the diagnosis parameter that estimates it or None, its true value in that parameter's units)."""
+    if kind == "delay":
+        d = int(rng.integers(5, 50))
+        return f"delay:{d}", "samples", d
+    if kind == "periodic-disturbance":
+        f = float(rng.choice([50.0, 60.0, 41.7]))
+        return f"periodic-disturbance:{f},3,{rng.uniform(3e-4, 2e-3):.2e}", "frequencies_hz", f
+    if kind == "input-nonlinearity":
+        h2 = float(rng.uniform(-45, -30))
+        return f"input-nonlinearity:{h2:.1f},{rng.uniform(-45, -30):.1f}", "h2_db", h2
+    if kind == "input-noise":
+        snr = float(rng.uniform(3, 12))
+        return f"input-noise:{snr:.1f}", "input_snr_db", snr
+    if kind == "clock-drift":
+        ppm = float(rng.uniform(20, 100) * rng.choice([-1, 1]))
+        return f"clock-drift:{ppm:.1f}", "ppm", ppm
+    if kind == "time-variation":
+        return f"time-variation:{rng.uniform(2, 5) * rng.choice([-1, 1]):.1f},200,{int(rng.integers(0, 3))}", None, None
+    if kind == "dc-offset":
+        level = float(rng.uniform(0.003, 0.03) * rng.choice([-1, 1]))
+        return f"dc-offset:{level:.4f}", "ear_offset_fs", level
+    if kind == "clipping":
+        return f"clipping:{rng.uniform(1.1, 1.6):.2f},{rng.choice([1.0, rng.uniform(0.1, 0.6)]):.2f}", None, None
+    if kind == "resonance":
+        f0 = float(np.exp(rng.uniform(np.log(60.0), np.log(3600.0))))
+        return (f"resonance:{f0:.1f},{rng.uniform(3, 15):.2f},{rng.uniform(6, 14) * rng.choice([1, 1, -1]):.2f}",
+                "f0_hz", f0)
+    if kind == "highpass":
+        corner = float(rng.uniform(10.0, 80.0))
+        return f"highpass:{corner:.1f},{int(rng.integers(1, 3))}", "corner_hz", corner
+    if kind == "lowpass":
+        corner = float(np.exp(rng.uniform(np.log(1000.0), np.log(16000.0))))
+        return f"lowpass:{corner:.0f},{int(rng.integers(1, 3))}", "corner_hz", corner
+    raise ValueError(kind)

@@ -9,7 +9,7 @@ from sysid.diagnose import diagnose, format_findings
 from sysid.model import Model
 from sysid.refine import format_refinement, refine_auto
 
-from effect_sessions import TEST_REFIT, effect_case
+from effect_sessions import TEST_REFIT, effect_case, reference_case
 
 
 def test_resampling_undoes_a_fast_ear_clock():
@@ -21,9 +21,10 @@ def test_resampling_undoes_a_fast_ear_clock():
     assert np.max(np.abs(corrected - expected)[10:-10]) < 1e-3
 
 
-@pytest.mark.parametrize("ppm, word", [(50.0, "fast"), (-60.0, "slow")])
-def test_drift_is_found_with_its_sign_and_corrected(ppm, word, tmp_path):
-    session, model = effect_case("ff", 5, (f"clock-drift:{ppm}",))
+@pytest.mark.parametrize("ppm, word, case", [(50.0, "fast", effect_case), (-60.0, "slow", reference_case)])
+def test_drift_is_found_with_its_sign_and_corrected(ppm, word, case, tmp_path):
+    # Self-identified (the model from the drifting session itself), and a model from a clean session.
+    session, model = case("ff", 5, (f"clock-drift:{ppm}",))
     findings = diagnose(model, session.noise, session.sweeps)
     top = findings.significant[0]
     assert top["effect"] == "clock-drift", format_findings(findings)

@@ -36,8 +36,8 @@ def test_ear_offset_is_found_and_taken_into_the_model(path, level, tmp_path):
     assert not diagnose(auto.model, session.noise, session.sweeps).significant
 
 
-def test_an_input_offset_is_reported_but_is_no_ear_offset():
+def test_an_input_offset_is_named_on_the_input_channel():
     session, model = effect_case("ff", 5, ("dc-offset:0.01,0",))
     top = diagnose(model, session.noise, session.sweeps).significant[0]
     assert top["effect"] == "dc-offset" and "input" in top["params"]["channel"]
-    assert top["params"]["ear_offset_fs"] == 0.0
+    assert top["params"]["offset_fs"] == pytest.approx(0.01, abs=1e-3)

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.signal
 
 from ..compare import third_octave_bands
+from ..data_quality import clipped_samples
 from ..validation import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding
 
@@ -143,7 +144,9 @@ def recording_change(ctx: DiagnosisContext) -> dict:
     centres, levels, error = recording_levels(ctx)
     low, mid = centres < LOW_HZ, (centres >= LOW_HZ) & (centres <= 2000.0)
     names = list(levels)
-    if np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
+    # A clipped recording's levels are the clipper's, not the path's (the clipping finding names it).
+    clipped = any(clipped_samples(x).fraction > 0 for r in (ctx.noise, *ctx.sweeps) for x in (r.u, r.y))
+    if clipped or np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
         return {"changed": False, "pairs": {}, "odd_one_out": None, "change_db": 0.0}
 
     def shape(a, b):
