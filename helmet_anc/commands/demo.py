@@ -15,6 +15,7 @@ from sysid.grid import terminal_progress
 from sysid.identify import identify
 from sysid.model import atomic_write_text
 from sysid.simulate import SessionSpec, simulate_session, write_session
+from ..progress import busy
 from .common import identification_summary
 
 # The hidden effects of the demo's second FF session: 23 samples of extra converter
@@ -71,27 +72,31 @@ def run(args) -> int:
     for path in ("fb", "ff"):
         session = simulate_session(SessionSpec(path=path, seed=args.seed))
         files = write_session(session, outdir / path)
-        result = identify(session.noise, session.sweeps, path, progress=terminal_progress())
+        result = identify(session.noise, session.sweeps, path, progress=None if args.quiet else terminal_progress())
         result.model.save(outdir / f"{path}_model.json")
         atomic_write_text(outdir / f"{path}_model.grid.csv", result.grid.to_csv())
         print(identification_summary(result))
         models[path] = (result.model, files, result, session)
     print(f"models written to {outdir}/fb_model.json and {outdir}/ff_model.json")
-    refined = _refinement_loop(models["ff"][0], outdir, args.seed)
+    with busy("demo: diagnose and refine --auto", args.quiet):
+        refined = _refinement_loop(models["ff"][0], outdir, args.seed)
     if not args.no_report:
         from sysid.report import write_report
 
         (outdir / "reports").mkdir(exist_ok=True)
-        for path, (model, files, result, session) in models.items():
-            write_report(outdir / "reports" / f"{path}-report.html", model, session.noise, session.sweeps,
-                         identification=result)
-        model, session = refined
-        write_report(outdir / "reports" / "ff-refined-report.html", model, session.noise, session.sweeps)
+        with busy("demo: HTML reports", args.quiet):
+            for path, (model, files, result, session) in models.items():
+                write_report(outdir / "reports" / f"{path}-report.html", model, session.noise, session.sweeps,
+                             identification=result)
+            model, session = refined
+            write_report(outdir / "reports" / "ff-refined-report.html", model, session.noise, session.sweeps)
         print(f"\nHTML reports in {outdir}/reports/ (fb-report.html, ff-report.html, ff-refined-report.html)")
     if not args.no_firmware:
         print("\nfirmware: C filters generated and verified sample by sample on both sweeps (host build)")
         (outdir / "firmware").mkdir(exist_ok=True)
         for path, (model, files, _, _) in models.items():
-            print(_firmware(model, outdir / "firmware" / path, (files["sweep1"], files["sweep2"])))
+            with busy(f"demo: {path} firmware, generated and verified", args.quiet):
+                text = _firmware(model, outdir / "firmware" / path, (files["sweep1"], files["sweep2"]))
+            print(text)
         print(f"C sources and manifests in {outdir}/firmware/")
     return 0

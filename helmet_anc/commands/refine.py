@@ -8,6 +8,7 @@ from sysid.errors import HelmetAncError
 from sysid.model import Model
 from sysid.recordings import load_recording
 from sysid.refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
+from ..progress import busy
 from .common import add_force_option, add_recording_options, check_output, check_report_target, load_sweeps
 
 ORDER = 32
@@ -37,12 +38,14 @@ def run(args) -> int:
     sweeps = load_sweeps(args)
     stop_reason = None
     if args.auto:
-        auto = refine_auto(model, noise, sweeps)
+        with busy("refine --auto: diagnose, add, refit", args.quiet):
+            auto = refine_auto(model, noise, sweeps)
         model, steps, stop_reason = auto.model, auto.steps, auto.stop_reason
     else:
         steps = []
         for spec in specs:
-            result = refine(model, noise, sweeps, spec)
+            with busy(f"refine: adding {spec.kind}", args.quiet):
+                result = refine(model, noise, sweeps, spec)
             steps.append(result.step)
             model = result.model
             if result.step.worse:

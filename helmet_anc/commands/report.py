@@ -5,6 +5,7 @@ from __future__ import annotations
 from sysid.errors import HelmetAncError
 from sysid.recordings import load_recording
 from sysid.report.data import GRID_CHOICES
+from ..progress import busy
 from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
 
 ORDER = 60
@@ -33,6 +34,7 @@ def run(args) -> int:
         write_report,  # matplotlib loads only when a report is made
     )
 
-    written = write_report(output, model, noise, sweeps, grid=args.grid, dpi=args.dpi)
+    with busy("report: grid, diagnosis and figures", args.quiet):
+        written = write_report(output, model, noise, sweeps, grid=args.grid, dpi=args.dpi)
     print(f"wrote {written}")
     return 0
