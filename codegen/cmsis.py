@@ -17,6 +17,14 @@ bit against the ``cmsisdsp`` package by the tests):
     (y_lo A >> 32) + y_hi A with y_lo the unsigned low and y_hi the signed high
     word; the stage output is (int32)(acc >> (31 - postShift)).
 
+Neither Q31 kernel saturates: a stage output beyond full scale wraps. For them the
+cascade is scaled in the worst-case (l1) norm, so no stage output, including the
+last, can exceed full scale for any input: the last stage is scaled down by
+2^-output_shift and the Q31 -> Q15 conversion of the generated code multiplies that
+back with saturation (:func:`q31_to_q15`). The postShift is also raised until the
+64-bit accumulator cannot overflow (sum |row| < 2^(postShift + 1) with states below
+full scale).
+
 The float variant uses ``arm_biquad_cascade_df2T_f32`` (transposed direct form
 II). The design reference measured 51-55 dB for the plain Q31 kernel on poles
 this close to the unit circle and 87-90 dB for the 64-bit-state one.
@@ -30,7 +38,7 @@ import numpy as np
 
 from .errors import PrecisionError
 from .reference import delay_signal
-from .sections import Cascade
+from .sections import Cascade, impulse_l1
 
 __all__ = [
     "KERNELS",
@@ -40,6 +48,7 @@ __all__ = [
     "df2t_f32_reference",
     "q15_kernel",
     "q31_kernel",
+    "q31_to_q15",
     "q31x64_kernel",
 ]
 
@@ -55,6 +64,8 @@ class CmsisTables:
 
     ``q31_coefficients`` (with ``post_shift``) serve the ``q31`` and ``q31x64``
     kernels, ``q15_coefficients`` (with ``q15_post_shift``) the ``q15`` kernel.
+    The Q31 rows' last stage is scaled by 2^-``output_shift`` (undone, saturating,
+    in the Q31 -> Q15 conversion).
     """
 
     kernel: str
@@ -64,6 +75,7 @@ class CmsisTables:
     q15_coefficients: tuple[tuple[int, int, int, int, int], ...]
     f32_coefficients: tuple[tuple[float, float, float, float, float], ...]
     delay: int
+    output_shift: int = 0
 
 
 def _wrap(value: int, bits: int) -> int:
@@ -73,29 +85,54 @@ def _wrap(value: int, bits: int) -> int:
 
 
 def _quantise_rows(rows, bits: int) -> tuple[int, tuple]:
-    """Smallest postShift making every coefficient fit Q(bits-1), and the rounded integers."""
+    """Smallest postShift making every coefficient fit Q(bits-1), and the rounded integers.
+
+    For the 32-bit rows the postShift also keeps the 64-bit accumulator from wrapping:
+    with states below full scale, |acc| < sum|row| 2^(62 - postShift) < 2^63.
+    """
     largest = max(abs(v) for row in rows for v in row)
     post_shift = max(0, int(np.ceil(np.log2(largest))) if largest > 0 else 0)
     if largest >= 2.0**post_shift * (1 - 2.0 ** -(bits - 1)):
         post_shift += 1
+    if bits == 32:
+        while max(sum(abs(v) for v in row) for row in rows) >= 2.0 ** (post_shift + 1) * (1 - 2.0**-20):
+            post_shift += 1
     scale = 2.0 ** (bits - 1 - post_shift)
     top = 2 ** (bits - 1)
     ints = tuple(tuple(int(np.clip(round(v * scale), -top, top - 1)) for v in row) for row in rows)
     return post_shift, ints
 
 
+def _output_shift(cascade: Cascade, full_scale: float) -> int:
+    """Smallest P with the cascade's worst-case (l1) gain times 2^-P below ``full_scale``."""
+    poles = [p for s in cascade.sections for p in s.poles]
+    if any(abs(p) >= 1 for p in poles):
+        return 0  # no finite worst case (an unstable model, allowed explicitly)
+    l1 = impulse_l1(cascade.sections, poles)
+    return max(0, int(np.ceil(np.log2(l1 / full_scale)))) if l1 > 0 else 0
+
+
 def design_cmsis(cascade: Cascade, delay: int, input_polynomial=None, kernel: str = "q31") -> CmsisTables:
-    """Tables of the cascade in CMSIS order; each postShift is the smallest that fits all rows."""
+    """Tables of the cascade in CMSIS order; each postShift is the smallest that fits all rows.
+
+    ``cascade`` should be scaled in the l1 norm (:func:`codegen.sections.design_cascade`
+    with ``scaling='l1'``) so the Q31 kernels' intermediate stages cannot wrap; the last
+    Q31 stage is scaled by 2^-output_shift so it cannot either (see the module docstring).
+    """
     if input_polynomial is not None:
         raise PrecisionError("the cmsis target does not implement an input polynomial; use --target generic")
     if kernel not in KERNELS:
         raise PrecisionError(f"CMSIS kernel must be one of {', '.join(KERNELS)}; found {kernel!r}")
     rows = [(*s.b, -s.a[1], -s.a[2]) for s in cascade.sections]
-    post_shift, q31 = _quantise_rows(rows, 32)
+    # 1 - 2^-10: room for the coefficient rounding of the Q31 tables.
+    output_shift = _output_shift(cascade, 1 - 2.0**-10)
+    down = 2.0**-output_shift
+    q31_rows = rows[:-1] + [(rows[-1][0] * down, rows[-1][1] * down, rows[-1][2] * down, rows[-1][3], rows[-1][4])]
+    post_shift, q31 = _quantise_rows(q31_rows, 32)
     q15_post_shift, q15 = _quantise_rows(rows, 16)
     f32 = tuple(tuple(float(np.float32(v)) for v in row) for row in rows)
     return CmsisTables(kernel=kernel, post_shift=post_shift, q31_coefficients=q31, q15_post_shift=q15_post_shift,
-                       q15_coefficients=q15, f32_coefficients=f32, delay=int(delay))
+                       q15_coefficients=q15, f32_coefficients=f32, delay=int(delay), output_shift=output_shift)
 
 
 def q15_kernel(tables: CmsisTables, x: np.ndarray) -> np.ndarray:
@@ -150,14 +187,19 @@ def q31x64_kernel(tables: CmsisTables, x: np.ndarray) -> np.ndarray:
     return np.asarray(signal, dtype=np.int32)
 
 
+def q31_to_q15(y: np.ndarray, output_shift: int) -> np.ndarray:
+    """The generated code's Q31 kernel output -> Q15: times 2^output_shift, round to nearest, saturate."""
+    r = (np.asarray(y, np.int64) * (1 << output_shift) + 32768) >> 16
+    return np.clip(r, -32768, 32767).astype(np.int16)
+
+
 def cmsis_q15_reference(tables: CmsisTables, u: np.ndarray) -> np.ndarray:
     """The generated cmsis Q15 process(): delay, then the kernel (Q31 kernels: x << 16 in, rounded to Q15 out)."""
     u = delay_signal(np.asarray(u, dtype=np.int16), tables.delay)
     if tables.kernel == "q15":
         return q15_kernel(tables, u)
     kernel = q31_kernel if tables.kernel == "q31" else q31x64_kernel
-    y = kernel(tables, u.astype(np.int64) * 65536).astype(np.int64)
-    return np.clip((y + 32768) >> 16, -32768, 32767).astype(np.int16)
+    return q31_to_q15(kernel(tables, u.astype(np.int64) * 65536), tables.output_shift)
 
 
 def df2t_f32_reference(tables: CmsisTables, u: np.ndarray) -> np.ndarray:

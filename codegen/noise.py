@@ -21,7 +21,7 @@ sine (L-infinity) and for the worst-case input (L1 norm of the impulse response)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -153,6 +153,11 @@ def predict_cmsis(cascade: Cascade, tables, fs: float) -> Prediction:
         return Prediction(roundoff_power=float("inf"), coefficient_snr_db=float("-inf"),
                           roundoff_snr_db=float("-inf"), snr_db=float("-inf"))
     roundoff = 0.0 if tables.kernel == "q15" else Q15_NOISE
+    up = 1.0 if tables.kernel == "q15" else 2.0**tables.output_shift
+    if up != 1.0:
+        # The Q31 tables' last stage is scaled by 2^-output_shift; the output conversion undoes it.
+        last = realised[-1]
+        realised[-1] = replace(last, b=tuple(v * up for v in last.b))
     for k in range(len(realised)):
         later = realised[k + 1:]
         if tables.kernel == "q31x64":
@@ -161,6 +166,8 @@ def predict_cmsis(cascade: Cascade, tables, fs: float) -> Prediction:
         else:
             gain = _noise_gain(realised, k, w, False)
             dc = abs(cascade_response(later, np.zeros(1))[0] / np.polyval(realised[k].a[::-1], 1.0))
+        if k == len(realised) - 1:
+            gain, dc = gain * up**2, dc * up  # the last stage's floor is scaled up with it
         roundoff += step**2 / 12 * gain + (step / 2 * dc) ** 2
     return _assemble(cascade, realised, fs, roundoff)
 

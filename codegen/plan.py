@@ -74,6 +74,9 @@ def plan_firmware(model: Model, *, variant: str = "both", fs: float | None = Non
     if quantiser not in QUANTISERS:
         raise CodegenError(f"quantiser must be one of {', '.join(QUANTISERS)}; found {quantiser!r}")
     realisation = realise(model, fs=fs, order=order, allow_unstable=allow_unstable)
+    if target == "cmsis":
+        # CMSIS-DSP's Q31 kernels wrap on overflow: only worst-case (l1) scaling makes that impossible.
+        scaling = "l1"
     cascade = design_cascade(realisation, scaling=scaling, headroom_db=headroom_db)
     polynomial = model.input_nonlinearity
     want_fixed, want_float = variant in ("q15", "both"), variant in ("float", "both")

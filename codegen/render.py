@@ -158,6 +158,7 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
         # The Q15 kernel's rows carry a zero after b0 (CMSIS-DSP's layout for its dual 16-bit MACs).
         context["cmsis_q15"] = [[f"(q15_t){v}" for v in (row[0], 0, *row[1:])] for row in cmsis.q15_coefficients]
         context["post_shift"] = cmsis.post_shift
+        context["output_shift"] = cmsis.output_shift
         context["cmsis_q31"] = [[f"(q31_t){v}" if v != -(2**31) else "(q31_t)(-2147483647 - 1)" for v in row]
                                 for row in cmsis.q31_coefficients]
         context["cmsis_f32"] = [[float_literal(v) for v in row] for row in cmsis.f32_coefficients]

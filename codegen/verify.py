@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .build import HostFilter
-from .cmsis import cmsis_q15_reference, df2t_f32_reference
+from .cmsis import cmsis_q15_reference, df2t_f32_reference, q31_to_q15
 from .errors import VerificationError
 from .plan import Plan
 from .reference import (
@@ -148,8 +148,7 @@ class CmsisPackageFilter:
             return np.asarray(self._dsp.arm_biquad_cascade_df1_q15(self._fixed, u), np.int16)
         run = (self._dsp.arm_biquad_cascade_df1_q31 if self._tables.kernel == "q31"
                else self._dsp.arm_biquad_cas_df1_32x64_q31)
-        y = run(self._fixed, u.astype(np.int32) * 65536).astype(np.int64)
-        return np.clip((y + 32768) >> 16, -32768, 32767).astype(np.int16)
+        return q31_to_q15(run(self._fixed, u.astype(np.int32) * 65536), self._tables.output_shift)
 
     def process_f32(self, x: np.ndarray) -> np.ndarray:
         u, self._line_f32 = self._delay(self._line_f32, np.asarray(x, np.float32))
