@@ -26,7 +26,9 @@ from .float32 import FloatDesign
 
 __all__ = [
     "C_KEYWORDS",
+    "C_LIBRARY_NAMES",
     "build_context",
+    "comment_text",
     "float_literal",
     "int_literal",
     "render_files",
@@ -38,23 +40,56 @@ __all__ = [
 C_KEYWORDS = frozenset(
     ["auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else", "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register", "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef", "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary", "_Alignas", "_Alignof", "_Atomic", "_Generic", "_Noreturn", "_Static_assert", "_Thread_local", "asm", "typeof", "main", "NULL", "errno", "assert", "bool", "true", "false"]
 )
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}\Z")
+# Names of the C standard library (C99 clause 7) a prefix must not take: the generated
+# identifiers and macros start with it, and a user's translation unit includes these headers.
+C_LIBRARY_NAMES = frozenset(
+    "abort abs acos asctime asin atan atan2 atexit atof atoi atol atoll bsearch calloc ceil clearerr clock "
+    "cos cosh ctime difftime div exit exp fabs fclose feof ferror fflush fgetc fgetpos fgets floor fmod fopen "
+    "fprintf fputc fputs fread free freopen frexp fscanf fseek fsetpos ftell fwrite getc getchar getenv gets "
+    "gmtime isalnum isalpha isblank iscntrl isdigit isgraph islower isprint ispunct isspace isupper isxdigit "
+    "labs ldexp ldiv llabs lldiv localeconv localtime log log10 longjmp lrint lround malloc mblen mbstowcs "
+    "mbtowc memchr memcmp memcpy memmove memset mktime modf offsetof perror pow printf putc putchar puts qsort "
+    "raise rand realloc remove rename rewind round scanf setbuf setjmp setlocale setvbuf signal sin sinh "
+    "snprintf sprintf sqrt srand sscanf strcat strchr strcmp strcoll strcpy strcspn strerror strftime strlen "
+    "strncat strncmp strncpy strpbrk strrchr strspn strstr strtod strtof strtok strtol strtold strtoll strtoul "
+    "strtoull strxfrm system tan tanh time tmpfile tmpnam tolower toupper ungetc va_arg va_copy va_end "
+    "va_start vfprintf vprintf vsnprintf vsprintf wcstombs wctomb stdin stdout stderr size_t ptrdiff_t "
+    "wchar_t FILE EOF BUFSIZ CHAR_BIT INT_MAX INT_MIN SIZE_MAX".split()
+)
+# C99 7.26 future library directions: reserved prefixes (is*, to*, str*, mem*, wcs*, E<digit or capital>,
+# SIG*, LC_*, int*_t / uint*_t).
+_RESERVED = re.compile(r"(is|to|str|mem|wcs)[a-z]|E[0-9A-Z]|SIG[A-Z_]|LC_[A-Z]|u?int.*_t\Z")
+_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}\Z")
+# Characters model text may keep in a C comment: no backslash (line splicing), no '?' (trigraphs),
+# no '*' or '/' pairs (comment delimiters), no newline.
+_COMMENT_UNSAFE = re.compile(r"[^A-Za-z0-9 .,:=+_()\[\]-]")
+
+
+def comment_text(value) -> str:
+    """``value`` as text safe inside a C comment: every character outside a small whitelist
+    (letters, digits, space and ``.,:=+_-()[]``) becomes ``_``, so model text cannot end the
+    comment, splice lines (backslash-newline) or form trigraphs."""
+    return _COMMENT_UNSAFE.sub("_", str(value))[:200]
 
 
 def validate_name(name: str) -> str:
     """Return ``name`` if it is a safe prefix for C identifiers, else raise InvalidNameError.
 
-    Accepted: a letter then up to 31 letters, digits or underscores (C99 keeps 31
-    significant characters of external names), not a C keyword. A leading
+    Accepted: a lower-case letter then up to 31 lower-case letters, digits or
+    underscores (C99 keeps 31 significant characters of external names; macros
+    use the name in capitals, so only lower case keeps them unique per name), not
+    a C keyword, a standard-library name or a prefix C99 7.26 reserves. A leading
     underscore is refused because such names are reserved to the implementation.
     """
     if not isinstance(name, str) or not _NAME.match(name):
-        shown = repr(name) if isinstance(name, str) and len(name) < 60 else "given name"
+        shown = repr(comment_text(name)) if isinstance(name, str) and len(name) < 60 else "given name"
         raise InvalidNameError(
-            f"--name must be a C identifier (a letter, then up to 31 letters, digits or underscores); found {shown}"
+            f"--name must be a lower-case C identifier (a letter, then up to 31 lower-case letters, digits or "
+            f"underscores; the macros use it in capitals, so 'ff' and 'FF' would collide); found {shown}"
         )
-    if name in C_KEYWORDS:
-        raise InvalidNameError(f"--name must not be a C keyword or reserved name; found {name!r}")
+    if name in C_KEYWORDS or name in C_LIBRARY_NAMES or _RESERVED.match(name):
+        raise InvalidNameError(f"--name must not be a C keyword, a C library name or a reserved prefix "
+                               f"(is*, to*, str*, mem*, wcs*, int*_t); found {name!r}")
     return name
 
 
@@ -112,22 +147,23 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
     carry the generic target's designs, ``cmsis`` the cmsis target's tables.
     """
     validate_name(name)
-    hash_text = provenance.get("hash", "unknown")
+    # Model text reaches the C only through comment_text (a whitelist).
+    hash_text = comment_text(provenance.get("hash", "unknown"))
     banner = (f"Generated by helmet-anc codegen {__version__} from model {hash_text}; do not edit.")
     gamma = provenance.get("gamma")
-    described = (f"path {provenance.get('path')}, file {provenance.get('file') or '(in memory)'}, "
-                 f"sha256 {hash_text}, gamma {gamma if gamma is not None else 'n/a'}, "
-                 f"order {provenance.get('order')}")
+    described = comment_text(f"path {provenance.get('path')}, file {provenance.get('file') or '(in memory)'}, "
+                             f"sha256 {hash_text}, gamma {gamma if gamma is not None else 'n/a'}, "
+                             f"order {provenance.get('order')}")
     poly_fixed = list(fixed.polynomial) if fixed is not None and fixed.polynomial else []
     poly_float = list(floating.polynomial) if floating is not None and floating.polynomial else []
     delay = (fixed or floating or cmsis).delay
     context = {
         "banner": banner,
-        "provenance": described.replace("*/", "* /"),
+        "provenance": described,
         "name": name,
         "NAME": name.upper(),
-        "guard": f"{name.upper()}_FILTER_H",
-        "path_label": provenance.get("path", "?").upper(),
+        "guard": f"HELMET_ANC_{name.upper()}_FILTER_H",
+        "path_label": comment_text(provenance.get("path", "unknown")).upper(),
         "fs_text": format(fs, ".6g"),
         "fs_int": round(fs),
         "sections": [{"order": s.order} for s in cascade.sections],
