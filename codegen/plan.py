@@ -78,6 +78,12 @@ def plan_firmware(model: Model, *, variant: str = "both", fs: float | None = Non
         # CMSIS-DSP's Q31 kernels wrap on overflow: only worst-case (l1) scaling makes that impossible.
         scaling = "l1"
     cascade = design_cascade(realisation, scaling=scaling, headroom_db=headroom_db)
+    if quantiser == "round" and target == "generic" and variant != "float" and any(s.poles for s in cascade.sections):
+        # Rounding to nearest inside a recursive section is a nonlinearity that can sustain a zero-input
+        # limit cycle (Oppenheim & Schafer, Discrete-Time Signal Processing, zero-input limit cycles); floor with first-order
+        # error feedback has no such cycle (the residue fed back makes the state decay to exactly 0).
+        raise PrecisionError("--quantiser round refused: rounding in a recursive section leaves a zero-input limit "
+                             "cycle (a constant hum of a few LSB); use --quantiser efb (the default)")
     polynomial = model.input_nonlinearity
     want_fixed, want_float = variant in ("q15", "both"), variant in ("float", "both")
     fixed = floating = cmsis = None

@@ -103,6 +103,10 @@ def rediscretise(A, B, fs_from: float, fs_to: float):
     return E[:n, :n], E[:n, n:]
 
 
+# Poles closer than this to the unit circle have no finite peak gain for scaling.
+UNIT_CIRCLE_TOLERANCE = 1e-9
+
+
 def realise(model: Model, fs: float | None = None, order: int | None = None, allow_unstable: bool = False) -> Realisation:
     """Balanced (optionally truncated) realisation of the model's LTI core at rate fs.
 
@@ -116,6 +120,16 @@ def realise(model: Model, fs: float | None = None, order: int | None = None, all
         raise UnstableModelError(
             f"model is unstable (spectral radius {model.spectral_radius:.6f} >= 1); use --allow-unstable to generate anyway"
         )
+    poles = np.linalg.eigvals(np.asarray(model.A, float)) if np.size(model.A) else np.zeros(0)
+    on_circle = poles[np.abs(np.abs(poles) - 1.0) < UNIT_CIRCLE_TOLERANCE]
+    if on_circle.size:
+        # Infinite gain at the pole's frequency: no section scaling exists (even for an unstable
+        # model, whose scaling uses the finite peak of its frequency response).
+        p = on_circle[0]
+        raise UnstableModelError(
+            f"model has a pole on the unit circle (z = {p.real:.6g}{p.imag:+.6g}j): its gain at that frequency is "
+            "infinite, so no fixed-point scaling exists even with --allow-unstable; re-identify the model or move "
+            "the pole inside (e.g. radius 0.9999)")
     if order is not None and order < 1:
         raise CodegenError(f"order must be at least 1; found {order}")
     A, B, C, D = model.A, model.B, model.C, float(model.D[0, 0])

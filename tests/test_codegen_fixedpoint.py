@@ -90,3 +90,26 @@ class TestRefusal:
     def test_cmsis_refusal_names_best_kernel(self):
         with pytest.raises(PrecisionError, match=r"best CMSIS kernel arm_biquad_cas_df1_32x64_q31\) refused"):
             plan_firmware(appendix_a_model("fb"), variant="q15", target="cmsis", min_snr=110.0)
+
+
+def _tail_after_burst(design):
+    """|output| over the last 20000 samples of 200000 zeros that follow a 2000-sample noise burst."""
+    rng = np.random.default_rng(1)
+    x = np.concatenate((to_q15(rng.uniform(-0.5, 0.5, 2000)), np.zeros(200_000, np.int16)))
+    return np.abs(fixed_reference(design, x)[-20_000:].astype(int))
+
+
+def test_round_quantiser_refused_for_recursive_sections():
+    """Rounding leaves a +-2 LSB zero-input limit cycle on the FB model: plan_firmware refuses it with the reason."""
+    realisation = realise(appendix_a_model("fb"))
+    cascade = design_cascade(realisation)
+    assert _tail_after_burst(design_fixed(cascade, realisation.delay, None, "round")).max() >= 1  # the defect
+    with pytest.raises(PrecisionError, match="limit cycle"):
+        plan_firmware(appendix_a_model("fb"), quantiser="round")
+
+
+@pytest.mark.parametrize("path", ["fb", "ff"])
+def test_error_feedback_decays_to_exact_zero(path):
+    plan = plan_firmware(appendix_a_model(path))
+    assert plan.fixed.quantiser == "efb"
+    assert _tail_after_burst(plan.fixed).max() == 0

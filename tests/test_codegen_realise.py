@@ -79,3 +79,15 @@ def test_unstable_model_refused():
         realise(m)
     r = realise(m, allow_unstable=True)
     assert r.A[0, 0] == pytest.approx(1.01)
+
+
+def test_pole_on_unit_circle_refused_even_when_unstable_allowed():
+    """A pole at z = 1 has no finite gain to scale by (the reference used to crash with NaN)."""
+    from codegen.plan import plan_firmware
+
+    model = Model(path="fb", fs=44100.0, A=np.diag([1.0, 0.5]), B=np.ones((2, 1)), C=np.array([[0.01, 0.2]]),
+                  D=np.zeros((1, 1)))
+    with pytest.raises(UnstableModelError, match="unit circle"):
+        plan_firmware(model, allow_unstable=True)
+    model.A = np.diag([1.001, 0.5])  # strictly outside: still generated when allowed
+    assert plan_firmware(model, allow_unstable=True, min_snr=0.0).fixed is not None
