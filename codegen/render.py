@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 
 import jinja2
+import numpy as np
 
 from sysid.files import OutputRefused, write_output_directory
 
@@ -139,6 +140,16 @@ def _float_sections(design: FloatDesign) -> list[dict]:
     return rows
 
 
+def _dc_gain(cascade) -> float:
+    """Gain of the cascade at z = 1: prod_k sum(b_k) / sum(a_k) (poles at z = 1 are refused earlier)."""
+    return float(np.prod([sum(s.b) / sum(s.a) for s in cascade.sections]))
+
+
+def _dc_headroom_lsb(dc_gain: float) -> int:
+    """Largest constant Q15 input (LSB) whose output magnitude stays at most 32767."""
+    return 32767 if abs(dc_gain) <= 1.0 else int(32767 // abs(dc_gain))
+
+
 def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, fixed: FixedDesign | None,
                   floating: FloatDesign | None, cmsis=None) -> dict:
     """The plain dictionary the templates render: names, literals, sizes, flags.
@@ -171,6 +182,8 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
         "delay": delay,
         "scaling": cascade.scaling,
         "output_peak_gain": format(cascade.node_gains[-1], ".4g"),
+        "dc_gain": float_literal(_dc_gain(cascade)),
+        "dc_headroom_lsb": _dc_headroom_lsb(_dc_gain(cascade)),
         "output_margin_db": format(-20 * math.log10(cascade.node_gains[-1]), ".1f"),
         "headroom_db": format(cascade.headroom_db, "g"),
         "has_float": "float" in variants,

@@ -27,6 +27,7 @@ void anc_init(anc_runtime *rt, anc_controller_fn controller, void *controller_co
         rt->serviced[h] = 0u;
     }
     rt->overruns = 0u;
+    rt->model_saturations = 0u;
     rt->controller = controller;
     rt->controller_context = controller_context;
 }
@@ -41,6 +42,9 @@ void anc_process_block(anc_runtime *rt, const int16_t *chin, const int16_t *ear,
     /* Internal model: what the ear would hear from the speaker alone. */
     fb_q15_process(&rt->fb, rt->played, rt->ear_model, ANC_BLOCK);
     for (i = 0; i < ANC_BLOCK; ++i) {
+        if (rt->ear_model[i] == INT16_MAX || rt->ear_model[i] == INT16_MIN) {
+            ++rt->model_saturations;
+        }
         rt->d_hat[i] = anc_sat16((int32_t)ear[i] - (int32_t)rt->ear_model[i]);
     }
     ff_q15_process(&rt->ff, chin, rt->ff_pred, ANC_BLOCK);

@@ -29,6 +29,14 @@
  *   ff_pred[n]   = G_ff * chin[n]     the ear noise predicted from the chin microphone;
  *   speaker      = controller(d_hat, ff_pred)   the application's control law.
  * All signals are Q15; differences saturate.
+ *
+ * Headroom of the disturbance estimate: ear_model saturates when the speaker's DC
+ * exceeds FB_DC_HEADROOM_LSB (32767 / FB_DC_GAIN, from fb_filter.h; 44 LSB for an FB
+ * model with a DC gain of 738, which identification gives when a pole sits near z = 1
+ * although a real speaker passes no DC). d_hat is then wrong by the excess, and
+ * model_saturations counts the saturated samples. Keep the control law's output DC
+ * below FB_DC_HEADROOM_LSB (e.g. a DC blocker in the control law) or use an FB model
+ * whose DC gain matches the helmet.
  */
 #ifndef ANC_RUNTIME_H
 #define ANC_RUNTIME_H
@@ -60,6 +68,7 @@ typedef struct {
     volatile uint32_t captured[2];  /* written by the interrupt only: captures of half h completed */
     volatile uint32_t serviced[2];  /* written by the main loop only: captures of half h processed */
     volatile uint32_t overruns;     /* written by the interrupt only: halves captured again unprocessed */
+    uint32_t model_saturations;     /* main loop: ear_model samples at the Q15 rail (see Headroom) */
     anc_controller_fn controller;   /* NULL: the speaker stays silent (observer only) */
     void *controller_context;
 } anc_runtime;

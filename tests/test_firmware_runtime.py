@@ -39,7 +39,23 @@ static void tag(void *context, const int16_t *d_hat, const int16_t *ff_pred, int
         speaker[i] = (int16_t)(calls * 64u + i);
     }
 }
-void test_setup(anc_runtime *rt, int law) { calls = 0u; anc_init(rt, law == 0 ? negate : tag, NULL); }
+static int16_t dc_level;
+static void dc(void *context, const int16_t *d_hat, const int16_t *ff_pred, int16_t *speaker, size_t n)
+{
+    size_t i;
+    (void)context; (void)d_hat; (void)ff_pred;
+    for (i = 0; i < n; ++i) {
+        speaker[i] = dc_level;
+    }
+}
+void test_setup(anc_runtime *rt, int law)
+{
+    calls = 0u;
+    anc_init(rt, law == 0 ? negate : (law == 1 ? tag : dc), NULL);
+}
+void test_set_dc(int16_t level) { dc_level = level; }
+int test_headroom(void) { return FB_DC_HEADROOM_LSB; }
+uint32_t test_saturations(const anc_runtime *rt) { return rt->model_saturations; }
 int16_t *test_buffer(anc_runtime *rt, unsigned half, int which)
 {
     return which == 0 ? rt->chin[half] : (which == 1 ? rt->ear[half] : rt->speaker[half]);
@@ -59,6 +75,9 @@ def runtime(tmp_path_factory):
     ffi.cdef("""
         typedef struct { ...; } anc_runtime;
         void test_setup(anc_runtime *rt, int law);
+        void test_set_dc(int16_t level);
+        int test_headroom(void);
+        uint32_t test_saturations(const anc_runtime *rt);
         void anc_dma_block_done(anc_runtime *rt, unsigned half);
         int anc_service(anc_runtime *rt);
         int16_t *test_buffer(anc_runtime *rt, unsigned half, int which);
@@ -168,3 +187,20 @@ def test_observer_and_predictor(runtime):
     ear_model = fixed_reference(fb_plan.fixed, played).astype(np.int32)
     expected_d = np.clip(ear.astype(np.int32) - ear_model, -32768, 32767).astype(np.int16)
     np.testing.assert_array_equal(np.concatenate(d_hat), expected_d)
+
+
+def test_speaker_dc_headroom_of_the_disturbance_estimate(runtime):
+    """The FB model's DC gain (738) leaves FB_DC_HEADROOM_LSB (44 LSB) of speaker DC before the
+    internal model saturates; beyond it the runtime counts the saturated samples."""
+    lib, ffi = runtime
+    headroom = lib.test_headroom()
+    assert headroom == 32767 // 738
+    counts = {}
+    for level in (headroom // 2, headroom + 10):
+        _memory, rt = _new(runtime, law=2)
+        lib.test_set_dc(level)
+        for k in range(1500):  # 48000 samples: four time constants of the slowest FB pole
+            lib.anc_dma_block_done(rt, k % 2)
+            lib.anc_service(rt)
+        counts[level] = lib.test_saturations(rt)
+    assert counts[headroom // 2] == 0 and counts[headroom + 10] > 1000
