@@ -150,6 +150,7 @@ def _manifest_data(plan: Plan, name: str, variant: str, files: dict[str, str], v
             "kernel": plan.cmsis.kernel,
             "kernel_predictions": {KERNEL_FUNCTIONS[k]: v.as_dict() for k, v in plan.kernel_predictions.items()},
             "post_shift": plan.cmsis.post_shift,
+            "output_shift": plan.cmsis.output_shift,
             "q31_coefficients": [list(r) for r in plan.cmsis.q31_coefficients],
             "q15_post_shift": plan.cmsis.q15_post_shift,
             "q15_coefficients": [list(r) for r in plan.cmsis.q15_coefficients],
