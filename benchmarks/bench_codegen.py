@@ -70,8 +70,10 @@ def _cmsis_runs(tables, q: np.ndarray, xf: np.ndarray) -> dict:
     df2t = dsp.arm_biquad_cascade_df2T_instance_f32()
     dsp.arm_biquad_cascade_df2T_init_f32(df2t, stages, np.array(tables.f32_coefficients, np.float32).ravel(),
                                          np.zeros(2 * stages, np.float32))
-    return {"q31": dsp.arm_biquad_cascade_df1_q31(plain, x31).astype(float) / 2**31,
-            "q31_32x64": dsp.arm_biquad_cas_df1_32x64_q31(wide, x31).astype(float) / 2**31,
+    # The Q31 tables' last stage is scaled by 2^-output_shift so no stage can wrap; scale back here.
+    scale = 2.0 ** (tables.output_shift - 31)
+    return {"q31": dsp.arm_biquad_cascade_df1_q31(plain, x31).astype(float) * scale,
+            "q31_32x64": dsp.arm_biquad_cas_df1_32x64_q31(wide, x31).astype(float) * scale,
             "f32_df2t": np.asarray(dsp.arm_biquad_cascade_df2T_f32(df2t, xf), float)}
 
 
@@ -102,7 +104,8 @@ def measure_snr(path: str, seconds: float, workdir: Path) -> list[dict]:
     manifest = generate_firmware(model, workdir / f"{path}_snr", min_snr=0.0)
     host = build_host(path, (manifest.outdir / f"{path}_filter.h").read_text(),
                       (manifest.outdir / f"{path}_filter.c").read_text())
-    tables = design_cmsis(plan.cascade, plan.realisation.delay)
+    # The tables --target cmsis generates (l1-scaled cascade, anti-wrap output shift).
+    tables = plan_firmware(model, target="cmsis", min_snr=0.0).cmsis
     naive, advance = naive_tables(model)
     rows = []
     for label, u in zip(("exponential", "linear"), sweeps(model, seconds)):
@@ -248,11 +251,14 @@ def _machine() -> str:
 def render(snr: dict, host: dict, m4: dict, seconds: float) -> str:
     today = datetime.date.today().isoformat()
     lines = [SECTION_TITLE, "",
-             f"Measured {today} on {_machine()} with `python benchmarks/bench_codegen.py`.", "",
+             f"Measured {today} on {_machine()} (2 cores, 24 GiB, shared with other work while measuring: "
+             "SNRs, instruction counts and sizes do not depend on the load) with "
+             "`python benchmarks/bench_codegen.py`.", "",
              f"### SNR against the float64 model (dB), two {seconds:g} s sweeps 20 Hz-4 kHz, output peak -1 dBFS", "",
              "Generated code: Q15 in/out with Q31 delta-form sections, error feedback (\"fixed\"), and float32 "
-             "(\"float\"), run as host builds. CMSIS-DSP columns run the `cmsisdsp` package's kernels on the same "
-             "sections (ordering, pairing, scaling) as CMSIS tables `{b0, b1, b2, -a1, -a2}`, Q31 output; "
+             "(\"float\"), run as host builds. CMSIS-DSP columns run the `cmsisdsp` package's kernels on the tables "
+             "`--target cmsis` generates (same ordering and pairing, worst-case l1 scaling so no stage can wrap, "
+             "last Q31 stage scaled by 2^-output_shift and scaled back at the output), Q31 output; "
              "\"Q15 bound\" is the float64 output itself rounded to Q15, the ceiling of any Q15-output filter.", "",
              "The last two columns run the same CMSIS kernels on sections straight from scipy's `zpk2sos` "
              "(its pairing and order, whole gain in the first section, no per-section scaling; its one-sample "
@@ -285,10 +291,9 @@ def render(snr: dict, host: dict, m4: dict, seconds: float) -> str:
     worst_fixed = min(r["fixed"] for rows in snr.values() for r in rows)
     worst_float = min(r["float"] for rows in snr.values() for r in rows)
     ratios = [r["q15"] / r["cmsis_q31"] for r in host.values()]
-    fb_plan = plan_firmware(appendix_a_model("fb"), min_snr=0.0)
-    fb_tables = design_cmsis(fb_plan.cascade, 0)
+    fb_plan = plan_firmware(appendix_a_model("fb"), target="cmsis", min_snr=0.0)
+    fb_tables = fb_plan.cmsis
     fb_last = fb_plan.cascade.sections[-1]
-    fb_b = max(abs(v) for v in fb_last.b)
     naive = naive_tables(appendix_a_model("fb"))[0]
     naive_largest = max(abs(v) for row in naive.f32_coefficients for v in row)
     cmsis_choice = ", ".join(
@@ -303,10 +308,13 @@ def render(snr: dict, host: dict, m4: dict, seconds: float) -> str:
               "(c1 = -a1 - 2, c2 = 1 - a2) keep float32's relative precision on the poles' distance from z = 1.",
               "- CMSIS-DSP on this generator's sections against CMSIS-DSP on zpk2sos sections: the float32 DF2T kernel "
               "does about as well on both; the plain q31 DF1 kernel does worse on the FB sections of this generator. "
-              "CMSIS shares one postShift among all stages, and the L-infinity scaling leaves the FB's last stage "
-              f"(pole at {fb_last.radius:.5f}) with max|b| = {fb_b:.1f}, so postShift = {fb_tables.post_shift} and every "
-              f"stage loses {fb_tables.post_shift} bits; zpk2sos's unscaled stages peak at {naive_largest:.2f} "
-              "for this model. The generated generic code "
+              "CMSIS's Q31 kernels wrap instead of saturating, so `--target cmsis` scales every stage in the worst-case "
+              f"(l1) norm; the FB's DC gain (738, pole at {fb_last.radius:.5f}) then needs the last stage scaled by "
+              f"2^-{fb_tables.output_shift}, which costs the plain q31 kernel (round-off fed back through its Q31 "
+              f"states) about {fb_tables.output_shift} bits; postShift = {fb_tables.post_shift}. zpk2sos's unscaled "
+              f"stages peak at {naive_largest:.2f} for this model; its columns carry the same anti-wrap output shift, "
+              "but its intermediate stages are not l1-scaled and can still wrap. "
+              "The generated generic code "
               "gives each section its own exponents and is not affected. Neither measurement reproduces the "
               "51-55 dB (q31) and 45-59 dB (DF2T) of the design reference, whose sections are not known here. "
               "The FF q31 columns are the raw Q31 output; rounded to Q15 they meet the same Q15 bound. The 32x64 "
