@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from sysid.diagnose import diagnose
+from sysid.errors import HelmetAncError
 from sysid.identify import IdentificationOptions, identify
 from sysid.random_plant import random_session
 from sysid.refine import refine_auto
@@ -72,7 +73,11 @@ def main() -> None:
     alarms, clean, clean_times = 0, 0, []
     for path in ("fb", "ff"):
         for k in range(args.clean):
-            r = run_session(path, 1000 + k, [], changes)
+            try:
+                r = run_session(path, 1000 + k, [], changes)
+            except HelmetAncError as exc:
+                print(f"clean {path} {k}: failed: {exc}", file=sys.stderr, flush=True)
+                continue
             clean += 1
             alarms += bool(r["findings"].significant)
             clean_times.append(r["diagnose"])
@@ -85,7 +90,13 @@ def main() -> None:
             for k in range(args.sessions):
                 rng = np.random.default_rng([k, sum(map(len, case)), ord(path[1])])
                 drawn = [random_effect(kind, rng) for kind in case]
-                r = run_session(path, 200 + k, [d[0] for d in drawn], changes)
+                try:
+                    r = run_session(path, 200 + k, [d[0] for d in drawn], changes)
+                except HelmetAncError as exc:
+                    # An identification that fails is counted and said, not hidden.
+                    stats["failed"].append(f"{path}: {exc}")
+                    print(f"{'+'.join(case)} {path} {k}: failed: {exc}", file=sys.stderr, flush=True)
+                    continue
                 top_two = [f for f in r["findings"].significant[:2]]
                 for kind, (_, name, truth) in zip(case, drawn):
                     hit = next((f for f in top_two if f["effect"] == kind), None)
@@ -102,6 +113,9 @@ def main() -> None:
                 stats["identify"].append(r["identify"])
                 print(f"{'+'.join(case)} {path} {k}: {[d[0] for d in drawn]} {r['before']:.2f}x -> {r['after']:.2f}x "
                       f"[{r['stop']}] found {[f['effect'] for f in top_two]}", file=sys.stderr, flush=True)
+        if not stats["before"]:
+            rows.append(f"| {' + '.join(case)} | 0 | identification failed: {'; '.join(stats['failed'])} |")
+            continue
         at_floor = np.mean(np.array(stats["after"]) <= 1.2)
         error = f"{np.median(stats['errors']):.3g}" if stats["errors"] else "-"
         stops = ", ".join(f"{n} {s}" for s, n in collections.Counter(stats["stop"]).most_common())
@@ -111,8 +125,9 @@ def main() -> None:
                     f"{np.median(stats['steps']):.0f} | {np.median(stats['diag_cpu']):.2f} | "
                     f"{np.median(stats['refine_cpu']):.1f} / {np.max(stats['refine_cpu']):.1f} | "
                     f"{np.median(stats['identify']):.1f} | {stops} |")
-    print(f"False alarms on clean random helmets: {alarms} of {clean} (any significant finding); diagnose CPU "
-          f"median {np.median([t[0] for t in clean_times]):.2f} s\n")
+    if clean:
+        print(f"Clean random helmets with a significant finding: {alarms} of {clean}; diagnose CPU "
+              f"median {np.median([t[0] for t in clean_times]):.2f} s\n")
     print("| effects | sessions | among top two | median parameter error | rms/floor before | after refine --auto | "
           "at most 1.2x after | steps (median) | diagnose CPU (s) | refine --auto CPU median / max (s) | identify (s) | "
           "stop reasons |")

@@ -163,10 +163,13 @@ def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
 
 
 def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s, extra_order: int = 2,
-                min_order: int = 1) -> Model:
+                min_order: int | None = None) -> Model:
     recordings = _transformed(model, [noise, *sweeps], input_map, frequencies)
     options = options or REFIT_OPTIONS
-    # Orders up to two above the model's: the added structure, not more order, should explain the data.
+    # Orders from the model's (an added structure does not take dynamics away: a lower order chosen
+    # against a floor that an unmodelled effect inflates leaves the model short once the effect is
+    # modelled) to two above it (the added structure, not more order, should explain the data).
+    min_order = model.order if min_order is None else min_order
     orders = tuple(n for n in options.orders if min_order <= n <= model.order + extra_order) or (model.order,)
     options = IdentificationOptions(**{**options.__dict__, "transient_s": transient_s, "orders": orders})
     return identify(recordings[0], recordings[1:], model.path, options).model
@@ -283,9 +286,10 @@ def _factor(kind):
             # Not at the floor: either the core was bent to mimic the factor (a fresh core behind
             # the factor fixes that), or another effect is left, which a fresh core would partly
             # take in and so hide from the next diagnosis. Only a fresh core at the floor is kept.
+            # A fresh core behind the factor may need fewer states: the old core had taken the factor in.
             core = _reidentify(model, noise, sweeps,
                                lambda u: scipy.signal.lfilter(b, a, _shift(model.apply_input_nonlinearity(u), model.delay)),
-                               model.disturbance_frequencies, options, transient_s)
+                               model.disturbance_frequencies, options, transient_s, min_order=1)
             fresh = _with(model, series(factor, _core(core)), identification=dict(core.identification))
             ratio = compare(fresh, sweeps).ratio if fresh.stable else np.inf
             if ratio <= AT_FLOOR or not scored:
@@ -328,8 +332,7 @@ def _clock_drift(model, noise, sweeps, params, options, transient_s):
     ratio = model.clock_ratio * (1.0 + params["ppm"] * 1e-6)
     trial = _with(model, _core(model), clock_ratio=ratio)
     # A data correction changes the data, not the dynamics: the refit keeps at least the model's order.
-    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s,
-                       min_order=model.order)
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
     refit = _with(trial, _core(core), identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"clock_ratio": ratio}
 
@@ -347,8 +350,7 @@ def _clipping(model, noise, sweeps, params, options, transient_s):
     if not excluded:
         raise IdentificationError("--add clipping: no recording clips")
     trial = _with(model, _core(model), excluded=excluded)
-    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s,
-                       min_order=model.order)
+    core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
     refit = _with(trial, _core(core), identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"excluded_fraction": [round(f, 6) for f in fractions]}
 
