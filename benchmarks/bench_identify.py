@@ -7,6 +7,10 @@ step 10 x order 1..20 = 2000 candidates) timed stage by stage over several repea
 ``seed-average`` and ``h1`` estimators side by side on the same session.
 
 Run:  python benchmarks/bench_identify.py [--repeats 5]   (prints a Markdown section)
+
+With ``--random N`` it instead runs the random helmets of seeds 0..N-1 (``sysid.random_plant``,
+thesis-length sessions: 23 s noise, two 9 s sweeps) side by side in one run: the seed's grid
+alone (no latency, no refinement) and the full pipeline, each against the true plant.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import numpy as np
 
 from sysid.grid import grid_search
 from sysid.identify import IdentificationOptions, identify
+from sysid.random_plant import random_plant, random_session
 from sysid.recordings import load_recording
 from sysid.simulate import SessionSpec, simulate_session, write_session
 from sysid.spectra import estimate_spectra
@@ -91,10 +96,68 @@ def bench_path(path: str, repeats: int, folder: Path) -> dict:
             "candidates": grid.rms.size, "stable": int(np.isfinite(grid.rms).sum())}
 
 
+def bench_random(seed: int, noise_seconds: float, sweep_seconds: float) -> dict:
+    """Seed grid alone and full pipeline on the random helmet ``seed``: rms / true floor, FRF error, order, delay, time."""
+    rp = random_plant(seed)
+    session = random_session(seed, noise_duration=noise_seconds, sweep_duration=sweep_seconds)
+    true_floor = simulated_rms(rp.model, session.sweeps)
+    f = np.geomspace(20.0, 4000.0, 2000)
+    h_true = rp.model.frequency_response(f)
+    out = {"seed": seed, "order": rp.order, "delay": rp.delay}
+    for label, options in (("grid", IdentificationOptions(refine=False, latency=False)), ("full", IdentificationOptions())):
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = identify(session.noise, session.sweeps, "fb", options)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        model = result.model
+        out[label] = {"rms": model.identification["rms"] / true_floor,
+                      "frf": float(np.max(np.abs(model.frequency_response(f) - h_true)) / np.max(np.abs(h_true))),
+                      "order": model.order, "delay": model.delay, "wall": wall, "cpu": cpu}
+    return out
+
+
+def main_random(count: int, noise_seconds: float, sweep_seconds: float) -> None:
+    rows = []
+    for seed in range(count):
+        rows.append(bench_random(seed, noise_seconds, sweep_seconds))
+        r = rows[-1]
+        print(f"<!-- seed {seed}: true n {r['order']} d {r['delay']}; " + "; ".join(
+            f"{k} rms {r[k]['rms']:.2f}x frf {r[k]['frf']:.3f} n {r[k]['order']} d {r[k]['delay']} {r[k]['wall']:.1f} s"
+            for k in ("grid", "full")) + " -->", flush=True)
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"\nMachine: {_cpu_model()}, {__import__('os').cpu_count()} cores, date {time.strftime('%Y-%m-%d')}. "
+          f"Command: `python benchmarks/bench_identify.py --random {count} --noise-seconds {noise_seconds:g} "
+          f"--sweep-seconds {sweep_seconds:g}`. Peak resident memory of the process: {peak_mib:.0f} MiB.\n")
+    print("| method | at floor (rms <= 1.2x, FRF <= 5 %) | median / worst rms/floor | median / worst FRF error | "
+          "order chosen - true (median, range) | delay error (range) | wall median / worst (s) | CPU median / worst (s) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label, name in (("grid", "seed grid alone"), ("full", "full pipeline")):
+        rms = np.array([r[label]["rms"] for r in rows])
+        frf = np.array([r[label]["frf"] for r in rows])
+        dn = np.array([r[label]["order"] - r["order"] for r in rows])
+        dd = np.array([r[label]["delay"] - r["delay"] for r in rows])
+        wall = np.array([r[label]["wall"] for r in rows])
+        cpu = np.array([r[label]["cpu"] for r in rows])
+        ok = int(np.sum((rms <= 1.2) & (frf <= 0.05)))
+        print(f"| {name} | {ok}/{len(rows)} | {np.median(rms):.2f} / {rms.max():.1f} | {np.median(frf):.3f} / {frf.max():.3f} | "
+              f"{np.median(dn):+.0f} ({dn.min():+d}..{dn.max():+d}) | {dd.min():+d}..{dd.max():+d} | "
+              f"{np.median(wall):.1f} / {wall.max():.1f} | {np.median(cpu):.1f} / {cpu.max():.1f} |")
+    failing = [r for r in rows if not (r["full"]["rms"] <= 1.2 and r["full"]["frf"] <= 0.05)]
+    if failing:
+        print("\nFull pipeline above the floor: " + ", ".join(
+            f"seed {r['seed']} ({r['full']['rms']:.2f}x, FRF {r['full']['frf']:.3f}, n {r['full']['order']}/{r['order']})"
+            for r in failing))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--random", type=int, default=0, metavar="N", help="run random helmets 0..N-1 instead")
+    parser.add_argument("--noise-seconds", type=float, default=23.0)
+    parser.add_argument("--sweep-seconds", type=float, default=9.0)
     args = parser.parse_args()
+    if args.random:
+        main_random(args.random, args.noise_seconds, args.sweep_seconds)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         results = {path: bench_path(path, args.repeats, Path(tmp)) for path in ("fb", "ff")}
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -1,25 +1,31 @@
 """The identification pipeline: noise recording + two sweeps -> a stable model of one path.
 
 1. Spectra of the noise recording after its transient (``spectra``: h1 or seed-average).
-2. The seed's grid over smoothing width gamma and order n of the frequency-domain
+2. The pure delay (latency) from the onset of the band-limited impulse response
+   (``latency``); everything after this works on delay-compensated data (the ear
+   signal advanced by the delay), and the delay goes into the model's ``delay``.
+3. The seed's grid over smoothing width gamma and order n of the frequency-domain
    subspace method, ranked by the true validation rms on both sweeps (``grid``).
-3. Beyond the seed (design.md, identification step 5): starting from the grid's best
-   model of each order, output-error refinement on the raw DFT of the noise recording
-   (``output_error``) in ascending order until more order stops paying, then the
-   chosen order refined on a longer block. Both the seed's choice and the refined
-   model are reported; the refined one is returned when it validates better.
+4. Beyond the seed (design.md, identification steps 5 and 6): an order search with
+   several output-error starts per order on the raw DFT of the noise recording
+   (``order_search``), up to ``max_order`` or until the validation rms reaches the
+   noise floor; the lowest order within ``min_gain`` of the best is refined on a
+   longer block. Both the seed's choice and the refined model are reported; the
+   refined one is returned when it validates better.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
+from .latency import LatencyEstimate, compensate_delay, estimate_latency
 from .model import PATHS, Model
+from .order_search import START_GAMMAS, search_orders, sweep_rms
 from .output_error import block_data, refine_output_error
 from .recordings import Recording, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
@@ -43,10 +49,15 @@ class IdentificationOptions:
     transient_s: float = 3.0
     feedthrough: bool = False
     refine: bool = True
-    scan_seconds: float = 0.5
+    scan_seconds: float = 1.0
     refine_seconds: float = 10.0
-    # Stop raising the order once this many successive orders improve the rms by < min_gain.
-    patience: int = 2
+    # Estimate the pure delay first and fit the core on delay-compensated data.
+    latency: bool = True
+    max_delay: int = 400
+    # The order search tries every order up to max_order unless the validation rms reaches
+    # at_floor times the noise floor first; it picks the lowest order within min_gain of the best.
+    max_order: int = 30
+    at_floor: float = 1.02
     min_gain: float = 0.03
 
 
@@ -63,6 +74,7 @@ class Identification:
     refined_rms: float | None
     order_scan: list[dict] = field(default_factory=list)
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    latency: LatencyEstimate | None = None
 
 
 def _check_inputs(noise: Recording, sweeps: list[Recording], options: IdentificationOptions) -> None:
@@ -86,9 +98,20 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
 
     t0 = time.perf_counter()
     body = noise.trimmed(options.transient_s)
-    spectra = estimate_spectra(body, options.estimator)
-    sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in sweeps]
     floor = noise_floor(sweeps[0], sweeps[1], options.validation_band)
+    latency = None
+    delay = 0
+    if options.latency:
+        latency = estimate_latency(estimate_spectra(body, "h1"), options.max_delay)
+        delay = latency.samples
+        body = compensate_delay(body, delay)
+        if delay:
+            # The delay may end one sample after the response's first sample; a direct term
+            # lets the core start there (latency module docstring).
+            options = replace(options, feedthrough=True)
+    core_sweeps = [compensate_delay(s, delay) for s in sweeps]
+    spectra = estimate_spectra(body, options.estimator)
+    sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
     seconds["spectra"] = time.perf_counter() - t0
 
     grid = grid_search(spectra, sweep_spectra, options.band, options.gammas, options.orders,
@@ -103,12 +126,13 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
         "transient_s": options.transient_s,
         "noise_file": noise.path,
         "sweep_files": [s.path for s in sweeps],
+        "latency": latency.to_dict() if latency else None,
         "grid": {"gammas": [int(grid.gammas[0]), int(grid.gammas[-1])], "orders": [int(grid.orders[0]), int(grid.orders[-1])],
                  "candidates": int(grid.rms.size), "stable": int(np.isfinite(grid.rms).sum())},
         "seed_choice": {"gamma": chosen.gamma, "order": chosen.order},
         "noise_floor": floor,
     }
-    seed_model = Model(path=path, fs=fs, A=chosen.fit.A, B=chosen.fit.B, C=chosen.fit.C, D=chosen.fit.D,
+    seed_model = Model(path=path, fs=fs, A=chosen.fit.A, B=chosen.fit.B, C=chosen.fit.C, D=chosen.fit.D, delay=delay,
                        identification=dict(provenance, method="seed grid (smoothed FRF + subspace)"))
     seed_rms = simulated_rms(seed_model, sweeps, options.validation_band)
     provenance["seed_choice"]["rms"] = seed_rms
@@ -116,7 +140,8 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
     result_model, refined_rms, scan = seed_model, None, []
     if options.refine:
         t0 = time.perf_counter()
-        result_model, refined_rms, scan = _refine(body, sweeps, spectra, grid, path, options, provenance, progress)
+        result_model, refined_rms, scan = _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options,
+                                                  provenance, progress)
         seconds["refinement"] = time.perf_counter() - t0
         if refined_rms >= seed_rms:
             # Keep the seed's choice, but say what the refinement tried and why it was dropped.
@@ -128,64 +153,53 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
     result_model.identification.update({
         "gamma": start_gamma,
         "order": result_model.order,
+        "delay": delay,
         "rms": final_rms,
         "noise_floor": floor,
         "refined": result_model is not seed_model,
     })
-    return Identification(result_model, grid, spectra, floor, seed_model, seed_rms, refined_rms, scan, seconds)
+    return Identification(result_model, grid, spectra, floor, seed_model, seed_rms, refined_rms, scan, seconds, latency)
 
 
-def _best_fit_per_order(spectra: Spectra, grid: GridResult, band, feedthrough: bool):
-    """For each order with a stable candidate: (order, gamma, grid rms, fit) of its best gamma."""
-    decompositions = {}
-    out = []
+def _decompositions(spectra: Spectra, grid: GridResult, band, feedthrough: bool, max_order: int):
+    """Smoothed-FRF subspace decompositions at the starting widths, and each order's best grid gamma."""
+    grid_gammas = {}
     for j, order in enumerate(grid.orders):
         column = grid.rms[:, j]
-        if not np.any(np.isfinite(column)):
-            continue
-        i = int(np.nanargmin(column))
-        gamma = int(grid.gammas[i])
-        if gamma not in decompositions:
-            frf = smoothed_response(spectra, gamma, band)
-            decompositions[gamma] = SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g,
-                                                          q=max(30, int(grid.orders.max()) + 2), feedthrough=feedthrough)
-        out.append((int(order), gamma, float(column[i]), decompositions[gamma]))
-    return out
+        if np.any(np.isfinite(column)):
+            grid_gammas[int(order)] = int(grid.gammas[int(np.nanargmin(column))])
+    limit = spectra.nperseg // 2
+    widths = sorted({g for g in (*grid_gammas.values(), *START_GAMMAS) if g <= limit})
+    decompositions = {}
+    for gamma in widths:
+        frf = smoothed_response(spectra, gamma, band)
+        q = min(max_order + 2, 2 * frf.frequencies.size)
+        decompositions[gamma] = SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g, q=q,
+                                                      feedthrough=feedthrough)
+    return decompositions, grid_gammas
 
 
-def _refine(body, sweeps, spectra, grid, path, options, provenance, progress):
+def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress):
     scan_block = block_data(body, options.band, options.scan_seconds)
-    candidates = _best_fit_per_order(spectra, grid, options.band, options.feedthrough)
-    scan = []
-    best_rms = np.inf
-    stalls = 0
-    for k, (order, gamma, grid_rms, decomposition) in enumerate(candidates):
-        fit = decomposition.fit_if_stable(order)
-        oe = refine_output_error(fit.A, fit.B, fit.C, fit.D, scan_block, feedthrough=options.feedthrough, max_iterations=30)
-        trial = Model(path=path, fs=body.fs, A=oe.A, B=oe.B, C=oe.C, D=oe.D)
-        rms = simulated_rms(trial, sweeps, options.validation_band)
-        scan.append({"order": order, "gamma": gamma, "grid_rms": grid_rms, "refined_rms": rms})
-        if progress:
-            progress(k + 1, len(candidates), "order scan")
-        if rms < best_rms * (1 - options.min_gain):
-            stalls = 0
-        else:
-            stalls += 1
-        best_rms = min(best_rms, rms)
-        if stalls >= options.patience:
-            break
-    if progress and scan and len(scan) < len(candidates):
-        progress(len(candidates), len(candidates), "order scan")
-    # The lowest order within min_gain of the best refined rms.
-    threshold = best_rms * (1 + options.min_gain)
-    pick = next(entry for entry in scan if entry["refined_rms"] <= threshold)
-    order, gamma = pick["order"], pick["gamma"]
-    decomposition = next(c[3] for c in candidates if c[0] == order)
-    fit = decomposition.fit_if_stable(order)
+    decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, options.max_order)
+    orders = range(1, options.max_order + 1)
+    candidates = search_orders(scan_block, sweep_spectra, decompositions, grid_gammas, orders, floor,
+                               feedthrough=options.feedthrough, at_floor=options.at_floor, progress=progress)
+    scan = [c.to_dict() for c in candidates]
+    # The lowest order within min_gain of the best validation rms.
+    best_rms = min(c.rms for c in candidates)
+    pick = next(c for c in candidates if c.rms <= best_rms * (1 + options.min_gain))
     block = block_data(body, options.band, options.refine_seconds)
-    oe = refine_output_error(fit.A, fit.B, fit.C, fit.D, block, feedthrough=options.feedthrough, max_iterations=60)
-    model = Model(path=path, fs=body.fs, A=oe.A, B=oe.B, C=oe.C, D=oe.D,
-                  identification=dict(provenance, method="seed grid, then output-error refinement on raw DFT data",
-                                      refinement={"start_gamma": gamma, "order": order, "block_seconds": block.length / body.fs,
-                                                  "order_scan": scan}))
+    oe = refine_output_error(pick.A, pick.B, pick.C, pick.D, block, feedthrough=options.feedthrough, max_iterations=60)
+    A, B, C, D = oe.A, oe.B, oe.C, oe.D
+    if sweep_rms(A, B, C, D, sweep_spectra) > pick.rms:
+        # The longer block did not help on the sweeps: keep the scan's model of that order.
+        A, B, C, D = pick.A, pick.B, pick.C, pick.D
+    gamma = int(pick.start.split("=")[1]) if pick.start.startswith("grid gamma=") else grid_gammas.get(pick.order, grid.chosen.gamma)
+    model = Model(path=path, fs=body.fs, A=A, B=B, C=C, D=D, delay=delay,
+                  identification=dict(provenance, method="latency, seed grid, then order search with output-error "
+                                                         "refinement from several starts on raw DFT data",
+                                      refinement={"start_gamma": gamma, "start": pick.start, "order": pick.order,
+                                                  "reflected_poles": pick.reflected,
+                                                  "block_seconds": block.length / body.fs, "order_scan": scan}))
     return model, simulated_rms(model, sweeps, options.validation_band), scan

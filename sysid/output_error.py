@@ -18,7 +18,7 @@ linear least-squares problem in the rest,
 
 the maximum-likelihood criterion for white output noise. Poles are parametrised so
 that every iterate is stable: a complex pair as r e^{+-j theta} with
-r = exp(-exp(sigma)), a real pole as tanh(xi).
+r = exp(-exp(sigma) - 1e-9), a real pole as (1 - 1e-9) tanh(xi).
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from . import lti
 from .errors import IdentificationError
 from .recordings import Recording
 
-__all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost"]
+__all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
+           "residual_spectrum"]
 
 
 @dataclass
@@ -79,6 +80,10 @@ def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
     return basis
 
 
+# Pole radius stays below 1 - _MARGIN (about 1e-9: a time constant of 1e9 samples).
+_MARGIN = 1e-9
+
+
 def _poles_to_params(poles: np.ndarray) -> tuple[np.ndarray, int]:
     """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole)."""
     pairs = [p for p in poles if p.imag > 1e-12]
@@ -86,16 +91,17 @@ def _poles_to_params(poles: np.ndarray) -> tuple[np.ndarray, int]:
     params = []
     for p in pairs:
         r = min(abs(p), 1 - 1e-12)
-        params += [np.log(-np.log(r)), np.angle(p)]
-    params += [np.arctanh(np.clip(p, -1 + 1e-12, 1 - 1e-12)) for p in reals]
+        params += [np.log(max(-np.log(r) - _MARGIN, 1e-300)), np.angle(p)]
+    params += [np.arctanh(np.clip(p / (1 - _MARGIN), -1 + 1e-12, 1 - 1e-12)) for p in reals]
     return np.array(params, dtype=float), len(pairs)
 
 
 def _params_to_poles(params: np.ndarray, pairs: int) -> np.ndarray:
     sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    r = np.exp(-np.exp(sigma))
+    # The margin keeps |p| below 1 in floating point however far sigma or xi run.
+    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _MARGIN)
     upper = r * np.exp(1j * theta)
-    return np.concatenate([upper, np.conj(upper), np.tanh(params[2 * pairs:]).astype(complex)])
+    return np.concatenate([upper, np.conj(upper), ((1 - _MARGIN) * np.tanh(params[2 * pairs:])).astype(complex)])
 
 
 @dataclass
@@ -107,6 +113,15 @@ class OutputErrorFit:
     cost_before: float
     cost_after: float
     iterations: int
+
+
+def _scaled_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Least-squares solution by QR (several times faster than the SVD-based lstsq), minimum-norm if rank deficient."""
+    q, r = scipy.linalg.qr(matrix, mode="economic", check_finite=False)
+    diagonal = np.abs(np.diag(r))
+    if diagonal.size and diagonal.min() > 1e-12 * diagonal.max():
+        return scipy.linalg.solve_triangular(r, q.T @ rhs, check_finite=False)
+    return np.linalg.lstsq(matrix, rhs, rcond=None)[0]
 
 
 class _Problem:
@@ -131,8 +146,7 @@ class _Problem:
         # Column scaling keeps the solve well conditioned when modes differ by decades.
         scale = np.linalg.norm(real, axis=0)
         scale[scale == 0] = 1.0
-        theta, *_ = np.linalg.lstsq(real / scale, rhs, rcond=None)
-        theta /= scale
+        theta = _scaled_solve(real / scale, rhs) / scale
         residual = rhs - real @ theta
         return A, C, theta, residual
 
@@ -166,6 +180,91 @@ class _Problem:
         return A, C, theta[order], rhs - real @ theta
 
 
+def _block_basis(pole: complex, z: np.ndarray) -> np.ndarray:
+    """``modal_basis`` columns of one block: a pair a +- jb with C = [1, 0], or a real pole with C = [1]."""
+    if pole.imag == 0:
+        return (1.0 / (z - pole.real))[:, None]
+    a, b = pole.real, pole.imag
+    den = (z - a) ** 2 + b**2
+    return np.stack([(z - a) / den, b / den], axis=1)
+
+
+class _Projection:
+    """Residual and Jacobian of the variable-projection criterion (Golub & Pereyra 1973).
+
+    With the regressor Phi(poles) and theta(poles) its least-squares solution, the
+    residual is r = y - Phi theta. Kaufman's approximation of its Jacobian (Kaufman,
+    BIT 15, 1975, eq. 2.5) is J_j = -P (dPhi / dx_j) theta with P = I - Q Q^T the
+    projector off the range of Phi (Q from a QR factorisation). A parameter moves only
+    the pole of its own block, so dPhi/dx_j theta is the change of that block's columns
+    times their coefficients, taken here by a one-sided difference of the closed-form
+    block basis: one QR per iteration instead of one least-squares solve per parameter.
+    """
+
+    def __init__(self, problem: _Problem, pairs: int, full: bool = True):
+        self.problem, self.pairs, self._full = problem, pairs, full
+        self._x = None
+
+    def _solve(self, x):
+        if self._x is not None and np.array_equal(x, self._x):
+            return
+        poles = _params_to_poles(x, self.pairs)
+        p = self.problem
+        A = lti.real_block_diagonal(poles)
+        C = lti.block_output_row(A)
+        basis = modal_basis(A, C, p.data.z)
+        columns = [basis * p.u_delayed[:, None], basis * p.data.z[:, None]]
+        if p.feedthrough:
+            columns.append(p.u_delayed[:, None])
+        regressor = np.hstack(columns)
+        real = np.vstack([regressor.real, regressor.imag])
+        rhs = np.concatenate([p.data.Y.real, p.data.Y.imag])
+        scale = np.linalg.norm(real, axis=0)
+        scale[scale == 0] = 1.0
+        q, r = scipy.linalg.qr(real / scale, mode="economic", check_finite=False)
+        diagonal = np.abs(np.diag(r))
+        if diagonal.min() > 1e-12 * diagonal.max():
+            theta = scipy.linalg.solve_triangular(r, q.T @ rhs, check_finite=False) / scale
+        else:  # rank deficient (coinciding poles): minimum-norm solution
+            theta = np.linalg.lstsq(real / scale, rhs, rcond=None)[0] / scale
+        self._x, self._poles, self._q, self._r, self._scale, self._theta = x.copy(), poles, q, r, scale, theta
+        self._residual = rhs - real @ theta
+
+    def residual(self, x):
+        self._solve(x)
+        return self._residual
+
+    def jacobian(self, x):
+        self._solve(x)
+        p, theta, n = self.problem, self._theta, self._poles.size
+        z, u = p.data.z, p.u_delayed
+        jac = np.empty((self._residual.size, x.size))
+        for j in range(x.size):
+            block = j // 2 if j < 2 * self.pairs else j - self.pairs
+            state = 2 * block if block < self.pairs else 2 * self.pairs + (block - self.pairs)
+            width = 2 if block < self.pairs else 1
+            step = 1e-7 * max(1.0, abs(x[j]))
+            moved = x.copy()
+            moved[j] += step
+            pole = self._poles[block] if block < self.pairs else self._poles[2 * self.pairs + block - self.pairs]
+            new_pole = _params_to_poles(moved, self.pairs)
+            new_pole = new_pole[block] if block < self.pairs else new_pole[2 * self.pairs + block - self.pairs]
+            change = (_block_basis(new_pole, z) - _block_basis(pole, z)) / step
+            coefficients = u[:, None] * theta[state:state + width] + z[:, None] * theta[n + state:n + state + width]
+            dv = (change * coefficients).sum(axis=1)
+            column = np.concatenate([dv.real, dv.imag])
+            jac[:, j] = -(column - self._q @ (self._q.T @ column))
+            if self._full:
+                # Second Golub-Pereyra term -(Phi^+)^T dPhi^T r, Phi^+ = R^-1 Q^T for the scaled columns.
+                g = np.zeros(self._q.shape[1])
+                for offset, factor in ((state, u), (n + state, z)):
+                    moved_columns = change * factor[:, None]
+                    stacked = np.vstack([moved_columns.real, moved_columns.imag])
+                    g[offset:offset + width] = stacked.T @ self._residual / self._scale[offset:offset + width]
+                jac[:, j] -= self._q @ scipy.linalg.solve_triangular(self._r, g, trans="T", check_finite=False)
+        return jac
+
+
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
                         max_iterations: int = 60, prefilter: np.ndarray | None = None,
                         input_noise_variance: float | np.ndarray | None = None) -> OutputErrorFit:
@@ -183,20 +282,20 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
         raise IdentificationError("output-error refinement needs a stable starting model")
     params, pairs = _poles_to_params(poles)
     problem = _Problem(data, delay, feedthrough, prefilter, input_noise_variance)
+    projection = _Projection(problem, pairs)
 
-    def residual(x):
-        return problem.linear(_params_to_poles(x, pairs))[3]
-
-    start = residual(params)
-    # least_squares' "lm" counts iterations in max_nfev (its Jacobian calls come on top).
+    start = projection.residual(params)
+    # least_squares' "lm" counts iterations in max_nfev (the Jacobian is analytic, see _Projection).
     with threadpool_limits(limits=1, user_api="blas"):
-        result = scipy.optimize.least_squares(residual, params, method="lm", x_scale="jac", max_nfev=max_iterations)
+        result = scipy.optimize.least_squares(projection.residual, params, jac=projection.jacobian, method="lm",
+                                              x_scale="jac", max_nfev=max_iterations)
     # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
     # result is not stable and the starting poles are kept instead.
     stable = np.all(np.abs(_params_to_poles(result.x, pairs)) < 1.0)
     x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
     solve = problem.linear if input_noise_variance is None else problem.bias_compensated
-    A_new, C_new, theta, final = solve(_params_to_poles(x, pairs))
+    with threadpool_limits(limits=1, user_api="blas"):
+        A_new, C_new, theta, final = solve(_params_to_poles(x, pairs))
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
     D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])
@@ -211,5 +310,14 @@ def linear_cost(A, data: BlockData, delay: int = 0, feedthrough: bool = False,
     scan a structure parameter (a delay, a corner frequency) before refining.
     """
     poles = np.linalg.eigvals(np.asarray(A, dtype=float))
-    residual = _Problem(data, delay, feedthrough, prefilter).linear(poles)[3]
+    with threadpool_limits(limits=1, user_api="blas"):
+        residual = _Problem(data, delay, feedthrough, prefilter).linear(poles)[3]
     return float(np.sum(residual**2))
+
+
+def residual_spectrum(A, data: BlockData, delay: int = 0, feedthrough: bool = False) -> np.ndarray:
+    """Complex output-error residual Y_k - model_k at the block's bins, poles of A held fixed."""
+    poles = np.linalg.eigvals(np.asarray(A, dtype=float))
+    residual = _Problem(data, delay, feedthrough).linear(poles)[3]
+    m = data.z.size
+    return residual[:m] + 1j * residual[m:]

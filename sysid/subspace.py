@@ -30,7 +30,8 @@ import scipy.linalg
 from . import lti
 from .errors import IdentificationError
 
-__all__ = ["SubspaceDecomposition", "SubspaceFit", "subspace_fit", "fit_b_d", "stabilise"]
+__all__ = ["SubspaceDecomposition", "SubspaceFit", "subspace_fit", "fit_b_d", "stabilise", "data_subspace_poles",
+           "reflect_unstable"]
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,51 @@ def stabilise(A, C, omega, g, feedthrough, method: str = "reflect", weights=None
     C_new = lti.block_output_row(A_new)
     B, D = fit_b_d(A_new, C_new, omega, g, feedthrough, weights)
     return SubspaceFit(A_new, B, C_new, D, True, f"reflected {int(unstable.sum())} pole(s) into the unit circle")
+
+
+def reflect_unstable(poles: np.ndarray, max_radius: float = 0.99995) -> tuple[np.ndarray, int]:
+    """Poles with |p| >= 1 replaced by 1/conj(p) (radius capped at max_radius), and how many moved."""
+    poles = np.asarray(poles, dtype=complex)
+    unstable = np.abs(poles) >= 1.0
+    reflected = np.where(unstable, 1.0 / np.conj(np.where(poles == 0, 1.0, poles)), poles)
+    radius = np.abs(reflected)
+    reflected = np.where(radius > max_radius, reflected * max_radius / np.maximum(radius, 1e-300), reflected)
+    return reflected, int(unstable.sum())
+
+
+def data_subspace_poles(z: np.ndarray, U: np.ndarray, Y: np.ndarray, orders, q: int | None = None) -> dict[int, np.ndarray]:
+    """Poles of every order in ``orders`` from raw input/output DFT data (no smoothing).
+
+    McKelvey, Akcay & Ljung (1996), Algorithm 1 (the input/output-data variant), with the
+    block's transient as an extra input: Y_k = G(z_k) U_k + C (z_k I - A)^-1 z_k x_delta,
+    so the input rows are [z_k^i U_k; z_k^i], i = 0..q-1, and the output rows z_k^i Y_k.
+    1. Real LQ factorisation of [inputs; outputs]; L22 holds the output part orthogonal
+       to both inputs. 2. SVD of L22; the observability matrix of order n is U[:, :n].
+    3. A from the shift property by least squares; its eigenvalues are returned (the
+       rest of the model follows linearly, see ``output_error``). Unlike the smoothed-FRF
+       variant this has no smoothing bias at lightly damped modes.
+    """
+    z = np.asarray(z, dtype=complex)
+    orders = [int(n) for n in orders]
+    q = q or max(orders) + 10
+    if 2 * z.size < 3 * q:
+        raise IdentificationError(f"need at least {3 * q // 2 + 1} DFT bins for q={q}; found {z.size}")
+    powers = np.exp(1j * np.outer(np.arange(q), np.angle(z))) / np.sqrt(z.size)
+    scale_u = np.sqrt(np.mean(np.abs(U) ** 2)) or 1.0
+    scale_y = np.sqrt(np.mean(np.abs(Y) ** 2)) or 1.0
+    rows = np.vstack([powers * (U / scale_u)[None, :], powers, powers * (Y / scale_y)[None, :]])
+    stacked = np.hstack([rows.real, rows.imag])
+    r = scipy.linalg.qr(stacked.T, mode="r", check_finite=False)[0]
+    l22 = r[2 * q:3 * q, 2 * q:3 * q].T
+    u, _, _ = np.linalg.svd(l22)
+    out = {}
+    for n in orders:
+        if not 1 <= n < q:
+            raise IdentificationError(f"order must be between 1 and q-1 = {q - 1}; found {n}")
+        o = u[:, :n]
+        A = np.linalg.lstsq(o[:-1], o[1:], rcond=None)[0]
+        out[n] = np.linalg.eigvals(A)
+    return out
 
 
 class SubspaceDecomposition:

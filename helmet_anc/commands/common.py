@@ -71,12 +71,14 @@ def identification_summary(result: Identification) -> str:
     info = model.identification
     lines = [
         f"path {model.path}: estimator {info['estimator']}, fs {model.fs:g} Hz",
+        *([f"  latency          : {result.latency.samples} samples ({result.latency.centimetres:.1f} cm of sound path), "
+           f"core fitted on delay-compensated data"] if result.latency is not None else []),
         f"  seed grid choice : gamma {info['seed_choice']['gamma']}, order {info['seed_choice']['order']}, "
         f"rms {result.seed_rms:.3e} FS ({result.seed_rms / result.noise_floor:.2f}x noise floor)",
     ]
     if result.refined_rms is not None:
-        lines.append(f"  refined (output error on raw data): order {info['refinement']['order']} from gamma "
-                     f"{info['refinement']['start_gamma']}, rms {result.refined_rms:.3e} FS "
+        lines.append(f"  refined (output error on raw data): order {info['refinement']['order']} from "
+                     f"{info['refinement'].get('start', 'gamma ' + str(info['refinement']['start_gamma']))}, rms {result.refined_rms:.3e} FS "
                      f"({result.refined_rms / result.noise_floor:.2f}x noise floor)")
     kind = "refined" if info["refined"] else "seed grid"
     lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "

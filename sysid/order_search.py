@@ -1,0 +1,136 @@
+"""Order search with several output-error starts per order (design.md, identification step 6).
+
+One start per order lands in local minima, and a scan that stops after two orders of
+little gain stops on a plateau of them. Here every order n = 1..n_max is tried
+(until the validation rms reaches the noise floor) from several starting pole sets:
+
+- ``grid gamma=G``: the smoothed-FRF subspace model of order n at a few smoothing
+  widths (the seed grid's best gamma of that order and a fixed spread of widths),
+  unstable poles reflected into the unit circle instead of the candidate dropped;
+- ``raw subspace``: the input/output-DFT subspace model on the raw block (no
+  smoothing bias, ``subspace.data_subspace_poles``);
+- ``order n-1 + real pole`` and ``order n-2 + mode``: the previous orders' refined
+  poles plus a real pole, or plus a lightly damped pair at the frequency where that
+  model's residual relative to the input is largest.
+
+Every start is screened by the output-error cost with its poles held fixed (one linear
+least-squares solve), the best few are refined (``output_error``) and ranked by the
+validation rms on the sweeps; the best refined model of each order is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import lti
+from .output_error import BlockData, linear_cost, refine_output_error, residual_spectrum
+from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
+from .validation import SweepSpectrum, rms_from_responses
+
+__all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
+
+# Smoothing widths whose subspace models start every order, besides the grid's best of that order.
+START_GAMMAS = (30, 100, 300)
+# Refined starts per order (the best by the fixed-pole cost).
+_REFINED_STARTS = 2
+# Damping of a mode placed at the largest residual (Q of the new pair).
+_NEW_MODE_Q = 10.0
+
+
+@dataclass
+class OrderCandidate:
+    """The best refined model of one order, from which start, and its validation rms (FS)."""
+
+    order: int
+    start: str
+    rms: float
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    reflected: int = 0
+
+    def to_dict(self) -> dict:
+        return {"order": self.order, "start": self.start, "refined_rms": self.rms, "reflected_poles": self.reflected}
+
+
+def sweep_rms(A, B, C, D, sweeps: list[SweepSpectrum]) -> float:
+    """Validation rms of the core (A, B, C, D) on the (delay-compensated) sweep spectra."""
+    responses = [lti.frequency_response(A, B, C, D, np.exp(2j * np.pi * s.frequencies / s.fs)) for s in sweeps]
+    return rms_from_responses(sweeps, responses)
+
+
+def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np.ndarray:
+    """A pair at the frequency of the largest input-relative residual of the model with these poles."""
+    A = lti.real_block_diagonal(poles)
+    residual = residual_spectrum(A, block, feedthrough=feedthrough)
+    relative = np.abs(residual) ** 2 / np.maximum(np.abs(block.U) ** 2, 1e-300)
+    # Average over about 1 % of the bins so that one noisy bin does not decide.
+    width = max(1, block.z.size // 100)
+    smoothed = np.convolve(relative, np.ones(width) / width, mode="same")
+    omega = float(np.angle(block.z[int(np.argmax(smoothed))]))
+    radius = np.exp(-omega / (2 * _NEW_MODE_Q))
+    p = radius * np.exp(1j * omega)
+    return np.array([p, np.conj(p)])
+
+
+def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions: dict[int, SubspaceDecomposition],
+                  grid_gammas: dict[int, int], orders, floor: float, feedthrough: bool = False,
+                  at_floor: float = 1.02, patience: int = 6, max_iterations: int = 20,
+                  progress=None) -> list[OrderCandidate]:
+    """The best refined model of each order tried (see the module docstring).
+
+    ``decompositions`` maps gamma to the smoothed-FRF decomposition of that width;
+    ``grid_gammas`` maps an order to the seed grid's best gamma for it. Orders are tried
+    in ascending order; the search ends early once a model validates within ``at_floor``
+    times the noise floor ``floor`` (FS), or when ``patience`` successive orders have not
+    lowered the best rms by 1 % (a plateau of several orders, not the first stall).
+    """
+    orders = sorted(int(n) for n in orders)
+    raw = data_subspace_poles(block.z, block.U, block.Y, orders, q=max(orders) + 10)
+    best: dict[int, OrderCandidate] = {}
+    best_so_far, since = np.inf, 0
+    for k, n in enumerate(orders):
+        starts: list[tuple[str, np.ndarray, int]] = []
+        gammas = [grid_gammas[n]] if n in grid_gammas else []
+        gammas += [g for g in START_GAMMAS if g in decompositions and g not in gammas]
+        for gamma in gammas:
+            decomposition = decompositions[gamma]
+            if n > decomposition.max_order:
+                continue
+            A, _ = decomposition.observability(n)
+            poles, moved = reflect_unstable(np.linalg.eigvals(A))
+            starts.append((f"grid gamma={gamma}", poles, moved))
+        poles, moved = reflect_unstable(raw[n])
+        starts.append(("raw subspace", poles, moved))
+        if n - 1 in best:
+            previous = np.linalg.eigvals(best[n - 1].A)
+            starts.append((f"order {n - 1} + real pole", np.concatenate([previous, [0.5]]), 0))
+        if n - 2 in best:
+            previous = np.linalg.eigvals(best[n - 2].A)
+            starts.append((f"order {n - 2} + mode", np.concatenate([previous, _residual_mode(previous, block, feedthrough)]), 0))
+        screened = []
+        for label, poles, moved in starts:
+            A = lti.real_block_diagonal(poles)
+            screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved))
+        screened.sort(key=lambda item: item[0])
+        for _, label, A, moved in screened[:_REFINED_STARTS]:
+            fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
+                                      feedthrough=feedthrough, max_iterations=max_iterations)
+            rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
+            if n not in best or rms < best[n].rms:
+                best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved)
+        if progress:
+            progress(k + 1, len(orders), "order search")
+        record = min(c.rms for c in best.values())
+        if record < 0.99 * best_so_far:
+            best_so_far, since = record, 0
+        else:
+            since += 1
+        if best[n].rms <= at_floor * floor or since >= patience:
+            if progress and k + 1 < len(orders):
+                progress(len(orders), len(orders), "order search")
+            break
+    return [best[n] for n in sorted(best)]

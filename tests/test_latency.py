@@ -1,0 +1,49 @@
+"""Latency estimate (sysid.latency): the onset of the band-limited impulse response."""
+
+import numpy as np
+import pytest
+
+from sysid.latency import compensate_delay, delay_centimetres, estimate_latency
+from sysid.model import Model
+from sysid.random_plant import random_plant, random_session
+from sysid.recordings import Recording
+from sysid.spectra import estimate_spectra
+
+
+def _noise_recording(model: Model, seconds: float, noise: float, seed: int) -> Recording:
+    rng = np.random.default_rng(seed)
+    u = 0.1 * rng.standard_normal(int(seconds * model.fs))
+    return Recording(u, model.simulate(u) + noise * rng.standard_normal(u.size), model.fs)
+
+
+class TestEstimateLatency:
+    @pytest.mark.parametrize("delay", [0, 1, 7, 40, 150])
+    def test_pure_delay_of_a_one_pole_path(self, delay):
+        # y[t] = 0.5 y[t-1] + u[t-1-delay]: the impulse response starts at sample delay + 1,
+        # which is the latest estimate a core with a direct term can follow.
+        model = Model(path="fb", fs=44100.0, A=[[0.5]], B=[[1.0]], C=[[1.0]], D=[[0.0]], delay=delay)
+        estimate = estimate_latency(estimate_spectra(_noise_recording(model, 3.0, 1e-4, delay)))
+        assert delay - 2 <= estimate.samples <= delay + 1
+
+    @pytest.mark.parametrize("seed", range(6))
+    def test_random_helmets_within_two_samples_and_never_long(self, seed):
+        rp = random_plant(seed)
+        session = random_session(seed, noise_duration=6.0, sweep_duration=0.5)
+        estimate = estimate_latency(estimate_spectra(session.noise.trimmed(3.0)))
+        # Never beyond the first sample of the true response (index delay + 1).
+        assert rp.delay - 2 <= estimate.samples <= rp.delay + 1
+
+    def test_centimetres(self):
+        assert delay_centimetres(1, 44100.0) == pytest.approx(0.778, abs=1e-3)
+        model = Model(path="fb", fs=48000.0, A=[[0.2]], B=[[1.0]], C=[[1.0]], D=[[0.0]], delay=12)
+        estimate = estimate_latency(estimate_spectra(_noise_recording(model, 2.0, 1e-4, 3)))
+        assert estimate.centimetres == pytest.approx(100 * 343.0 * estimate.samples / 48000.0)
+        assert estimate.to_dict()["samples"] == estimate.samples
+
+
+def test_compensate_delay_aligns_the_ear_signal():
+    u = np.arange(10.0)
+    recording = Recording(u, np.concatenate(([0.0, 0.0, 0.0], u[:7])), 1000.0)
+    shifted = compensate_delay(recording, 3)
+    np.testing.assert_array_equal(shifted.u, shifted.y)
+    assert compensate_delay(recording, 0) is recording
