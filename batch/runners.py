@@ -87,7 +87,8 @@ def run_dask(tasks: list[SessionTask], scheduler=None, retries: int = DEFAULT_RE
     Each task is submitted with a key made of its session name and input hash, so the
     same session is never two tasks, and with ``retries`` so a task whose worker died
     runs again elsewhere. A task that still fails (e.g. ``KilledWorker``) gets a failed
-    row with Dask's reason.
+    row with Dask's reason. Give workers one thread each (``--nthreads 1``): each task
+    limits BLAS to one thread, and that limit is per process, not per thread.
     """
     from dask.distributed import Client, as_completed as dask_completed
 

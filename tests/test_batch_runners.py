@@ -72,7 +72,8 @@ class TestLocalPool:
 
 class TestDask:
     def test_same_results_as_the_local_pool_bit_for_bit(self, campaign, local_run, tmp_path):
-        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+        # Worker processes, as on a real cluster (in-process workers share one BLAS thread setting).
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                 distributed.Client(cluster) as client:
             result = run_batch(campaign[0], tmp_path / "out", scheduler=client, options=BATCH_OPTIONS)
         assert [data_columns(r) for r in result.rows] == [data_columns(r) for r in local_run.rows]

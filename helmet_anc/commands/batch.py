@@ -31,8 +31,11 @@ def register(commands) -> None:
 
 def _progress(done: int, total: int, row: dict) -> None:
     state = "resumed" if row.get("resumed") else row["status"]
-    detail = f": {row['reason']}" if row["status"] != "ok" else \
-        f", order {row['order']}, rms {row['rms_over_floor']:.2f}x floor"
+    if row["status"] != "ok":
+        detail = f": {row['reason']}"
+    else:
+        ratio = row["rms_over_floor"]
+        detail = f", order {row['order']}" + (f", rms {ratio:.2f}x noise floor" if ratio is not None else "")
     sys.stderr.write(f"[{done}/{total}] {row['session']} {state}{detail}\n")
     sys.stderr.flush()
 
