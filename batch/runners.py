@@ -66,6 +66,8 @@ def run_local(tasks: list[SessionTask], workers: int | None = None, retries: int
                 except BrokenProcessPool:
                     unfinished.append(futures[future])
                     continue
+                except Exception as exc:  # noqa: BLE001 - e.g. a result that cannot be written: a row, not the end
+                    row = _lost_row(futures[future], f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
                 done += 1
                 if progress:
                     progress(done, total, row)

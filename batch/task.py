@@ -39,6 +39,9 @@ ROW_FIELDS = ("session", "helmet", "head", "condition", "path", "status", "reaso
               "seconds_load", "seconds_identify", "seconds_refine", "seconds_total", "model_file", "input_hash", "resumed")
 
 
+_IDENTITY = ("session", "helmet", "head", "condition", "path")
+
+
 @dataclass(frozen=True)
 class SessionTask:
     """Everything a worker needs for one session: where the files are and how to identify."""
@@ -122,15 +125,14 @@ def run_session(task: SessionTask) -> dict:
             # Clipping and DC offsets are in each Recording's fields; the row reports them.
             warnings.simplefilter("ignore", RecordingWarning)
             row.update(_identify(entry, task, row, start))
+            # The model first, then its record (below): a record with status ok implies a complete model.
+            row.pop("_model").save(layout.model(entry.name))
     except Exception as exc:  # noqa: BLE001 - a task must report, not raise, whatever one session does
         message = str(exc).splitlines()[0] if str(exc) else ""
+        row.update({name: None for name in ROW_FIELDS if name not in _IDENTITY}, input_hash=task.digest, resumed=False)
         row.update(status="failed", reason=f"{type(exc).__name__}: {message}" if message else type(exc).__name__)
+    row.pop("_model", None)
     row["seconds_total"] = time.perf_counter() - start
-    if row["status"] == "ok":
-        # The model first, then its record: a record with status ok implies a complete model.
-        layout.model(entry.name).parent.mkdir(parents=True, exist_ok=True)
-        task_model = row.pop("_model")
-        task_model.save(layout.model(entry.name))
     layout.result(entry.name).parent.mkdir(parents=True, exist_ok=True)
     write_json(layout.result(entry.name), {"format": RESULT_FORMAT, "input_hash": task.digest, "row": row})
     return row
