@@ -467,8 +467,11 @@ class AutoRefinement:
     after: Comparison
 
 
-def _step_key(spec: EffectSpec) -> str:
-    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()}}, sort_keys=True)
+def _step_key(spec: EffectSpec, model: Model) -> str:
+    """What makes two steps the same: effect and parameters (more order: also the order it starts from)."""
+    start = {"order": model.order} if spec.kind == "under-modelled" else {}
+    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()}, **start},
+                      sort_keys=True)
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
@@ -504,13 +507,18 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             candidates = [f for f in candidates if f["effect"] != "input-noise"]
         candidates.sort(key=lambda f: f["effect"] not in _CORRECTIONS)
         specs = [(f, _auto_spec(f)) for f in candidates]
-        specs = [(f, spec) for f, spec in specs if _step_key(spec) not in tried]
+        specs = [(f, spec) for f, spec in specs if _step_key(spec, model) not in tried]
+        if not specs and not at_floor and "under-modelled" not in rejected:
+            # Everything named was tried and the error is still above the floor: more order is what is
+            # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
+            fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
+            specs = [(fallback, spec) for spec in [_auto_spec(fallback)] if _step_key(spec, model) not in tried]
         if not specs:
             stop_reason = ("effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
                            else "nothing left that lowers the error")
             break
         found, spec = specs[0]
-        tried.add(_step_key(spec))
+        tried.add(_step_key(spec, model))
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
             result = refine(model, noise, sweeps, spec, options, transient_s, current)
