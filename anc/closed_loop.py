@@ -109,3 +109,44 @@ def measured_attenuation(off: np.ndarray, on: np.ndarray, fs: float, skip_s: flo
             m = np.abs(f - np.sqrt(lo * hi)) == np.min(np.abs(f - np.sqrt(lo * hi)))
         result.append(float(10.0 * np.log10(p_off[m].sum() / max(p_on[m].sum(), 1e-300))))
     return result
+
+
+@dataclass
+class Verification:
+    """Predicted and achieved attenuation (dB per band, ``anc.prediction.BANDS``) of one configuration."""
+
+    part: str
+    predicted: np.ndarray
+    achieved: np.ndarray
+    limit: np.ndarray          # achieved by the same design made on the true plants
+    stable: bool
+    largest_pole: float
+
+
+def verify(controller: Controller, limit: Controller, s_true: Model, p_true: Model | None, disturbance,
+           seconds: float = 3.0, seed: int = 0) -> list[Verification]:
+    """Run ``controller`` (designed on identified models) and ``limit`` (the same design on the
+    true models) on the true plants for each configuration (ff, fb, both) the controller has.
+
+    The disturbance is synthesised from ``disturbance`` (``anc.disturbance.synthesize``) with
+    d = P_true x + u when there is a reference.
+    """
+    from .disturbance import synthesize
+
+    fs = s_true.fs
+    x, u = synthesize(disturbance, int(round(seconds * fs)), fs, seed)
+    d = u if x is None else p_true.simulate(x) + u
+    poles = closed_loop_poles(controller, s_true)
+    largest = float(np.max(np.abs(poles))) if poles.size else 0.0
+    parts = [p for p, on in (("ff", controller.ff is not None), ("fb", controller.fb is not None),
+                             ("both", controller.ff is not None and controller.fb is not None)) if on]
+    results = []
+    for part in parts:
+        use_ff, use_fb = part in ("ff", "both"), part in ("fb", "both")
+        ours = run_closed_loop(controller, s_true, d, x, use_ff, use_fb)
+        best = run_closed_loop(limit, s_true, d, x, use_ff, use_fb)
+        finite = bool(np.all(np.isfinite(ours.e)))
+        results.append(Verification(part, np.array(controller.predicted_attenuation_db[part]),
+                                    np.array(measured_attenuation(d, ours.e, fs)),
+                                    np.array(measured_attenuation(d, best.e, fs)), finite and largest < 1.0, largest))
+    return results

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sysid.errors import HelmetAncError
-from sysid.model import Model, atomic_write_text
+from sysid.files import atomic_write_text
+from sysid.model import Model
 from sysid import lti
 
 __all__ = ["CONTROLLER_FORMAT", "StateSpaceFilter", "Controller"]

@@ -103,6 +103,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             raise HelmetAncError("the FF model is unstable; identify or refine it again before designing a controller")
     if not (isinstance(options.latency, int) and options.latency >= 1):
         raise HelmetAncError(f"latency must be a whole number of samples >= 1; found {options.latency!r}")
+    if ff_model is not None:
+        model_uncertainty(ff_model)  # refuses an FF model whose error is unknown, as for the FB model
     disturbance = disturbance or default_disturbance(fb_model.fs, ff_model)
     uncertainty = uncertainty or model_uncertainty(fb_model)
     basis = LaguerreBasis.at(options.corner_hz, options.order, fb_model.fs)

@@ -7,6 +7,11 @@ From the model's ``uncertainty`` field (``{"frequencies_hz", "relative_95"}``, d
 the first / above the last frequency of the field, or outside the identification band)
 nothing is known, and the bound is ``OUTSIDE_BAND`` (100 %): a robust design then keeps
 |S_model Q| <= 0.5 there, i.e. does (almost) nothing.
+
+A model without an uncertainty field whose own validation error is more than
+``MAX_VALIDATION_RATIO`` (3) times the sweeps' noise floor (``identification["rms"]`` and
+``["noise_floor"]``) is refused: its error is then dominated by what it misses, which
+no default bound describes.
 """
 
 from __future__ import annotations
@@ -15,13 +20,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sysid.errors import HelmetAncError
 from sysid.identify import IDENTIFICATION_BAND
 from sysid.model import Model
 
-__all__ = ["Uncertainty", "model_uncertainty", "DEFAULT_IN_BAND", "OUTSIDE_BAND"]
+__all__ = ["Uncertainty", "model_uncertainty", "DEFAULT_IN_BAND", "OUTSIDE_BAND", "MAX_VALIDATION_RATIO"]
 
 DEFAULT_IN_BAND = 0.2
 OUTSIDE_BAND = 1.0
+MAX_VALIDATION_RATIO = 3.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,12 @@ def model_uncertainty(model: Model) -> Uncertainty:
         order = np.argsort(f)
         return Uncertainty(f[order], np.maximum(r[order], 0.0), (float(f.min()), float(f.max())),
                            "the model's uncertainty field")
+    info = model.identification if isinstance(model.identification, dict) else {}
+    rms, floor = info.get("rms"), info.get("noise_floor")
+    if rms is not None and floor and rms > MAX_VALIDATION_RATIO * floor:
+        raise HelmetAncError(f"the {model.path.upper()} model validates at {rms / floor:.1f}x the noise floor "
+                             f"(above {MAX_VALIDATION_RATIO:g}x) and states no uncertainty band: its error is unknown, "
+                             "so no controller can be guaranteed stable with it; diagnose and refine it first")
     band = IDENTIFICATION_BAND
     if isinstance(model.identification, dict) and model.identification.get("band_hz"):
         band = tuple(float(v) for v in model.identification["band_hz"])
