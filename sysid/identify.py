@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -105,10 +105,6 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
         latency = estimate_latency(estimate_spectra(body, "h1"), options.max_delay)
         delay = latency.samples
         body = compensate_delay(body, delay)
-        if delay:
-            # The delay may end one sample after the response's first sample; a direct term
-            # lets the core start there (latency module docstring).
-            options = replace(options, feedthrough=True)
     core_sweeps = [compensate_delay(s, delay) for s in sweeps]
     spectra = estimate_spectra(body, options.estimator)
     sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
@@ -181,8 +177,9 @@ def _decompositions(spectra: Spectra, grid: GridResult, band, feedthrough: bool,
 
 def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress):
     scan_block = block_data(body, options.band, options.scan_seconds)
-    decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, options.max_order)
-    orders = range(1, options.max_order + 1)
+    # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
+    orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
+    decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, max(orders))
     candidates = search_orders(scan_block, sweep_spectra, decompositions, grid_gammas, orders, floor,
                                feedthrough=options.feedthrough, at_floor=options.at_floor, progress=progress)
     scan = [c.to_dict() for c in candidates]

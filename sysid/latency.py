@@ -15,10 +15,10 @@ both 10 % of the peak and six times the RMS of the response at negative times (n
 and circular wrap-around of long modes).
 
 The kernel starts rising a few samples before the response it smooths, so the onset
-is never later than the first non-zero sample of the true impulse response. The
-estimate is the onset plus one sample, and the core fitted behind it carries a direct
-term D, so the model's response may begin at the estimated delay: it errs short, never
-long. That is the safe side: a delay estimated too long asks the core for a non-causal
+is never later than the first non-zero sample of the true impulse response; the core
+behind the delay has no direct term and adds one sample of its own, so the delay is
+the onset less one: it errs short by the kernel's lead plus one, 1 to 4 samples on
+the random helmets, never long. That is the safe side: a delay estimated too long asks the core for a non-causal
 response it cannot give, one too short only asks for a little more order.
 """
 
@@ -88,12 +88,11 @@ def estimate_latency(spectra: Spectra, max_delay: int | None = None) -> LatencyE
     threshold = max(_PEAK_FRACTION * float(np.max(np.abs(causal))), _NOISE_MULTIPLE * noise)
     above = np.flatnonzero(np.abs(causal[:limit]) > threshold)
     # The smoothing kernel puts the onset zero to three samples before the true response's
-    # first non-zero sample (index d + 1 for a delay d and a core without feedthrough).
-    # The delay is the onset plus one, for a core WITH a direct term D: its response may
-    # start at the delay itself, so it stays causal whenever onset <= d, which the
-    # kernel's lead guarantees, and the estimate is within 2 samples of d.
+    # first non-zero sample, index d + 1 for a delay d and a core without direct term (zero
+    # when that first sample is large, as for the seed's FB plant). The core adds one sample
+    # itself, so the delay line holds onset - 1 samples: short by the kernel's lead, never long.
     onset = int(above[0]) if above.size else 0
-    samples = onset + 1 if above.size else 0
+    samples = max(onset - 1, 0)
     return LatencyEstimate(samples, spectra.fs, onset, top, threshold, causal.copy())
 
 
