@@ -1,0 +1,121 @@
+"""Controller JSON contract, the design command, and a model that is wrong beyond its stated band."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from anc import CONTROLLER_FORMAT, Controller, design
+from anc.basis import LaguerreBasis
+from anc.closed_loop import closed_loop_poles, run_closed_loop
+from anc.controller import StateSpaceFilter
+from helmet_anc.cli import main
+from sysid.errors import HelmetAncError
+from sysid.model import Model
+from sysid.plants import appendix_a_model
+
+
+@pytest.fixture(scope="module")
+def seed_controller():
+    return design(appendix_a_model("fb"), appendix_a_model("ff"))
+
+
+def test_laguerre_statespace_matches_responses():
+    basis = LaguerreBasis.at(250.0, 6, 44100.0)
+    c = np.arange(1.0, 8.0)
+    A, B, C, D = basis.statespace(c)
+    f = np.array([30.0, 300.0, 3000.0])
+    z = np.exp(2j * np.pi * f / 44100.0)
+    direct = np.array([(C @ np.linalg.solve(zi * np.eye(6) - A, B))[0, 0] + D[0, 0] for zi in z])
+    np.testing.assert_allclose(direct, basis.responses(f, 44100.0) @ c, rtol=1e-10)
+
+
+def test_json_round_trip_keeps_the_contract(seed_controller, tmp_path):
+    path = tmp_path / "c.json"
+    seed_controller.save(path)
+    data = json.loads(path.read_text())
+    for key in ("format", "fs", "internal_model", "ff", "fb", "latency_samples", "bands_hz", "predicted_attenuation_db"):
+        assert key in data
+    assert data["format"] == CONTROLLER_FORMAT
+    assert set(data["predicted_attenuation_db"]) == {"ff", "fb", "both"}
+    again = Controller.load(path)
+    f = np.array([100.0, 1000.0])
+    np.testing.assert_allclose(again.fb.frequency_response(f, again.fs), seed_controller.fb.frequency_response(f, again.fs))
+    assert again.internal_model.to_dict() == seed_controller.internal_model.to_dict()
+
+
+def test_unstable_filter_in_json_is_refused(seed_controller):
+    data = seed_controller.to_dict()
+    data["fb"] = {"A": [[1.5]], "B": [[1.0]], "C": [[1.0]], "D": [[0.0]]}
+    with pytest.raises(HelmetAncError, match="'fb' is unstable"):
+        Controller.from_dict(data)
+
+
+def test_filters_are_stable_and_moderate(seed_controller):
+    for filt in (seed_controller.fb, seed_controller.ff):
+        assert filt.order <= 32
+        assert np.max(np.abs(np.linalg.eigvals(filt.A))) < 1.0
+
+
+def test_margins_reported(seed_controller):
+    m = seed_controller.margins
+    assert m["phase_margin_deg"] > 30.0
+    assert m["peak_amplification_db"] <= 6.0 + 0.1
+    assert m["robustness_factor"] >= 0.999
+
+
+def test_model_wrong_beyond_its_band_is_designed_conservatively():
+    """The model is right below 300 Hz (its stated band); the true path has 10 % more gain and
+    30 degrees more lag above it. Design must say why it is conservative, and stay stable."""
+    s = appendix_a_model("fb")
+    model = Model.from_dict({**s.to_dict(), "uncertainty": {"frequencies_hz": [20.0, 300.0], "relative_95": [0.05, 0.05]}})
+    # True path: S (1 + H (1.1 z^-4 - 1)), H a 2nd-order high-pass at 800 Hz: about S below 300 Hz,
+    # at least 10 % gain and 30 degrees phase away from it in 1-2 kHz.
+    b, a = scipy.signal.butter(2, 800.0, "highpass", fs=s.fs)
+    num = np.zeros(7)
+    num[:3] += a - b
+    num[4:] += 1.1 * b
+    A, B, C, D = scipy.signal.tf2ss(num, np.concatenate((a, [0.0] * 4)))
+    extra = Model(path="fb", fs=s.fs, A=A, B=B, C=C, D=D)
+    true_ss = s.to_statespace() * extra.to_statespace()
+    truth = Model(path="fb", fs=s.fs, A=true_ss.A, B=true_ss.B, C=true_ss.C, D=true_ss.D)
+    f = np.array([1000.0, 2000.0])
+    ratio = truth.frequency_response(f) / model.frequency_response(f)
+    assert np.all(np.abs(np.abs(ratio) - 1) >= 0.1) or np.all(np.abs(np.degrees(np.angle(ratio))) >= 30)
+    controller = design(model, None)
+    assert any("outside the model's stated band 20-300 Hz" in note for note in controller.notes)
+    assert np.max(np.abs(closed_loop_poles(controller, truth))) < 1.0
+    d = np.random.default_rng(0).standard_normal(20000) * 1e-3
+    assert np.all(np.isfinite(run_closed_loop(controller, truth, d).e))
+
+
+def test_fb_model_with_unknown_error_is_refused():
+    s = appendix_a_model("fb")
+    bad = Model.from_dict({**s.to_dict(), "identification": {"rms": 1e-2, "noise_floor": 1e-4}})
+    with pytest.raises(HelmetAncError, match="100.0x the noise floor"):
+        design(bad)
+
+
+def test_cli_design_writes_controller_and_report(tmp_path, capsys):
+    fb, ff = tmp_path / "fb.json", tmp_path / "ff.json"
+    appendix_a_model("fb").save(fb)
+    appendix_a_model("ff").save(ff)
+    out, report = tmp_path / "controller.json", tmp_path / "control.html"
+    assert main(["design", "--fb", str(fb), "--ff", str(ff), "-o", str(out), "--report", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "phase margin" in text and "band (Hz)" in text
+    assert Controller.load(out).ff is not None
+    assert b'name="generator" content="helmet-anc' in report.read_bytes()
+
+
+def test_cli_design_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
+    ff = tmp_path / "ff.json"
+    appendix_a_model("ff").save(ff)
+    out = tmp_path / "controller.json"
+    assert main(["design", "--fb", str(ff), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "FB model" in err
+    assert not out.exists()
