@@ -148,7 +148,8 @@ def _identify(entry: SessionEntry, task: SessionTask, row: dict, start: float) -
     if task.refine:
         from sysid.refine import refine_auto
 
-        model, steps = refine_auto(model, noise, sweeps, task.options, transient_s=task.options.transient_s)
+        auto = refine_auto(model, noise, sweeps, task.options, transient_s=task.options.transient_s)
+        model, steps = auto.model, [{"effect": step.effect, "accepted": bool(step.accepted)} for step in auto.steps]
     refined = time.perf_counter()
     rms = float(model.identification.get("rms", result.refined_rms or result.seed_rms))
     floor = float(result.noise_floor)
@@ -157,10 +158,9 @@ def _identify(entry: SessionEntry, task: SessionTask, row: dict, start: float) -
     return {
         "status": "ok", "reason": "", "order": model.order, "delay_samples": model.delay, "rms": rms,
         "noise_floor": floor, "rms_over_floor": rms / floor if floor > 0 else None, "seed_rms": float(result.seed_rms),
-        "refined": bool(steps and any(step.get("accepted", not step.get("worse")) for step in steps)),
+        "refined": any(step["accepted"] for step in steps),
         "refine_steps": len(steps),
-        "findings": ";".join(step["effect"] + ("" if step.get("accepted", not step.get("worse")) else "(rejected)")
-                             for step in steps),
+        "findings": ";".join(step["effect"] + ("" if step["accepted"] else "(rejected)") for step in steps),
         "data_quality": _data_quality([noise, *sweeps]),
         "seconds_load": loaded - start, "seconds_identify": identified - loaded,
         "seconds_refine": refined - identified if task.refine else 0.0,

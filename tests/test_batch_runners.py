@@ -176,3 +176,14 @@ class TestOutputFolder:
         with pytest.raises(HelmetAncError, match="not empty and was not written by helmet-anc batch"):
             run_batch(campaign[0], tmp_path, workers=1, options=BATCH_OPTIONS)
         assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
+
+
+class TestRefine:
+    def test_refine_runs_diagnosis_after_identification(self, campaign, tmp_path):
+        from batch import read_sessions
+
+        entries = read_sessions(campaign[0])[:1]
+        result = run_batch(entries, tmp_path / "out", workers=1, refine=True, options=BATCH_OPTIONS)
+        (row,) = result.rows
+        assert row["status"] == "ok", row["reason"]
+        assert row["seconds_refine"] > 0 and row["refine_steps"] == len([f for f in row["findings"].split(";") if f])
