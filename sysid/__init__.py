@@ -19,6 +19,7 @@ from .simulate import Session, SessionSpec, simulate_session, write_session
 from .spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
 from .subspace import SubspaceDecomposition, subspace_fit
 from .validation import noise_floor, simulated_rms
+from .uncertainty import UncertaintyBand, frequency_response_band
 from .compare import Comparison, compare, format_comparison
 from .diagnose import diagnose, format_findings
 from .refine import Refinement, format_refinement, refine, refine_auto
@@ -32,6 +33,6 @@ __all__ = [
     "appendix_a_model", "Recording", "check_same_rate", "load_recording", "recording_from_arrays",
     "Session", "SessionSpec", "simulate_session", "write_session", "estimate_spectra", "parzen_lag_window",
     "response", "smooth_spectra", "smoothed_response", "SubspaceDecomposition", "subspace_fit",
-    "noise_floor", "simulated_rms", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
+    "noise_floor", "simulated_rms", "UncertaintyBand", "frequency_response_band", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
     "Refinement", "refine", "refine_auto", "format_refinement", "report", "__version__",
 ]

@@ -66,6 +66,32 @@ def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     return array
 
 
+def _uncertainty_band(value) -> dict | None:
+    """The ``uncertainty`` field checked: null or {"frequencies_hz", "relative_95", ...} (sysid.uncertainty)."""
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise ModelError('uncertainty must be null or an object {"frequencies_hz": [..], "relative_95": [..]}')
+    for key in ("frequencies_hz", "relative_95"):
+        if key not in value:
+            raise ModelError(f"uncertainty is missing {key!r}")
+    try:
+        frequencies = np.asarray(value["frequencies_hz"], dtype=float).reshape(-1)
+        relative = np.asarray(value["relative_95"], dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ModelError("uncertainty frequencies_hz and relative_95 must be lists of numbers") from None
+    if frequencies.size != relative.size:
+        raise ModelError(f"uncertainty frequencies_hz and relative_95 must have the same length; found "
+                         f"{frequencies.size} and {relative.size}")
+    if not (np.all(np.isfinite(frequencies)) and np.all(np.isfinite(relative))):
+        raise ModelError("uncertainty frequencies_hz and relative_95 must be finite")
+    if np.any(relative < 0):
+        raise ModelError("uncertainty relative_95 must be non-negative")
+    if np.any(np.diff(frequencies) <= 0) or np.any(frequencies < 0):
+        raise ModelError("uncertainty frequencies_hz must be non-negative and increasing")
+    return {**value, "frequencies_hz": frequencies.tolist(), "relative_95": relative.tolist()}
+
+
 @dataclass
 class Model:
     """One identified sound path; see the module docstring for the signal chain.
@@ -94,6 +120,8 @@ class Model:
     output_offset: float = 0.0
     clock_ratio: float = 1.0
     excluded: dict[str, list[list[float]]] = field(default_factory=dict)
+    # 95 % bound on |H_model - H_true| / |H_model| per frequency (sysid.uncertainty); None when unknown.
+    uncertainty: dict | None = None
 
     def __post_init__(self):
         if self.path not in PATHS:
@@ -153,6 +181,7 @@ class Model:
             self.excluded = {str(name): [[float(a), float(b)] for a, b in spans] for name, spans in self.excluded.items()}
         except (TypeError, ValueError):
             raise ModelError("excluded must map each recording to [[start_s, stop_s], ...]") from None
+        self.uncertainty = _uncertainty_band(self.uncertainty)
 
     # -- properties -------------------------------------------------------------
     @property
@@ -247,6 +276,7 @@ class Model:
             **({"output_offset": self.output_offset} if self.output_offset else {}),
             **({"clock_ratio": self.clock_ratio} if self.clock_ratio != 1.0 else {}),
             **({"excluded": dict(self.excluded)} if self.excluded else {}),
+            **({"uncertainty": dict(self.uncertainty)} if self.uncertainty is not None else {}),
         }
 
     @classmethod
@@ -287,6 +317,7 @@ class Model:
             output_offset=data.get("output_offset", 0.0),
             clock_ratio=data.get("clock_ratio", 1.0),
             excluded=data.get("excluded") or {},
+            uncertainty=data.get("uncertainty"),
         )
 
     def to_json(self) -> str:
