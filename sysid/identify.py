@@ -30,6 +30,7 @@ from .output_error import block_data, refine_output_error
 from .recordings import Recording, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
+from .uncertainty import frequency_response_band
 from .validation import VALIDATION_BAND, check_repeats, noise_floor, simulated_rms, sweep_spectrum
 
 __all__ = ["IdentificationOptions", "Identification", "identify", "IDENTIFICATION_BAND"]
@@ -154,6 +155,11 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
         "noise_floor": floor,
         "refined": result_model is not seed_model,
     })
+    # The 95 % band of the returned model (sysid.uncertainty), from the delay-compensated noise block it was refined on.
+    t0 = time.perf_counter()
+    core = Model(path=path, fs=fs, A=result_model.A, B=result_model.B, C=result_model.C, D=result_model.D)
+    result_model.uncertainty = frequency_response_band(core, body, spectra, options.band, options.refine_seconds).to_dict()
+    seconds["uncertainty"] = time.perf_counter() - t0
     return Identification(result_model, grid, spectra, floor, seed_model, seed_rms, refined_rms, scan, seconds, latency)
 
 
