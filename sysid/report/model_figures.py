@@ -37,6 +37,14 @@ def model_bode_figure(model, spectra: Spectra, gamma: int | None = None, band=(2
         axes[1].plot(f_model, seed_phase, color=COLORS["seed"], ls="--", lw=1.0)
     axes[0].plot(f_model, db(g_model), color=COLORS["model"], lw=1.0, label=f"model, n = {model.order}, delay {model.delay}")
     axes[1].plot(f_model, phase_model, color=COLORS["model"], lw=1.0)
+    if model.uncertainty is not None:
+        # 95 % band |H| (1 +- relative_95) (sysid.uncertainty); a bound of 100 % or more reaches -60 dB re |H|.
+        f_band = np.asarray(model.uncertainty["frequencies_hz"])
+        inside = (f_band >= band[0]) & (f_band <= band[1])
+        relative = np.asarray(model.uncertainty["relative_95"])[inside]
+        magnitude = np.abs(model.frequency_response(f_band[inside]))
+        axes[0].fill_between(f_band[inside], db(magnitude * np.maximum(1 - relative, 1e-3)), db(magnitude * (1 + relative)),
+                             color=COLORS["model"], alpha=0.25, lw=0, label="model 95 % band")
     axes[0].set_ylabel("magnitude (dB)")
     axes[1].set_ylabel("phase (deg, unwrapped)")
     for ax in axes:
