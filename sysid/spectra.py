@@ -43,6 +43,7 @@ __all__ = [
     "FrequencyResponse",
     "segment_length",
     "estimate_spectra",
+    "streamed_spectra",
     "parzen_lag_window",
     "smooth_spectra",
     "smoothed_response",
@@ -107,6 +108,49 @@ def estimate_spectra(noise: Recording, estimator: str = "h1", nperseg: int | Non
     _, s_yy = scipy.signal.welch(y, **options)
     _, s_yu = scipy.signal.csd(u, y, **options)
     return Spectra(noise.fs, nperseg, s_uu, s_yu, s_yy, estimator, 2 * segments - 1)
+
+
+def streamed_spectra(read, length: int, fs: float, nperseg: int | None = None, name: str = "<stream>",
+                     segments_per_block: int = 256) -> Spectra:
+    """The h1 spectra of ``estimate_spectra`` computed block by block, in bounded memory.
+
+    ``read(start, stop)`` returns the (u, y) samples start..stop-1 (full-scale units) of a
+    recording of ``length`` samples (transient already removed). Two passes: the channel
+    means, then the same Hann-windowed, 50 %-overlapping segments as ``scipy.signal.welch``
+    (starts 0, step = nperseg - nperseg // 2, no padding), ``segments_per_block`` at a
+    time, so memory is a few blocks of segments whatever the length; the result equals
+    ``estimate_spectra(recording, "h1")`` to rounding.
+    """
+    nperseg = nperseg or segment_length(fs)
+    if length // nperseg < 1:
+        raise IdentificationError(f"{name}: {length / fs:.3g} s after the transient is shorter than one "
+                                  f"averaging segment of {nperseg / fs:.3g} s")
+    step = nperseg - nperseg // 2
+    count = (length - nperseg) // step + 1
+    sums = np.zeros(2)
+    for start in range(0, length, step * segments_per_block):
+        u, y = read(start, min(start + step * segments_per_block, length))
+        sums += (np.sum(u), np.sum(y))
+    mean_u, mean_y = sums / length
+    window = scipy.signal.get_window("hann", nperseg)
+    s_uu = np.zeros(nperseg // 2 + 1)
+    s_yy = np.zeros(nperseg // 2 + 1)
+    s_yu = np.zeros(nperseg // 2 + 1, dtype=complex)
+    for first in range(0, count, segments_per_block):
+        last = min(first + segments_per_block, count)
+        u, y = read(first * step, (last - 1) * step + nperseg)
+        index = (np.arange(last - first) * step)[:, None] + np.arange(nperseg)[None, :]
+        U = np.fft.rfft((u[index] - mean_u) * window, axis=1)
+        Y = np.fft.rfft((y[index] - mean_y) * window, axis=1)
+        s_uu += np.sum(np.abs(U) ** 2, axis=0)
+        s_yy += np.sum(np.abs(Y) ** 2, axis=0)
+        s_yu += np.sum(Y * np.conj(U), axis=0)
+    # scaling="spectrum": divide by (sum w)^2; one-sided: double every bin but DC (and Nyquist for even N).
+    scale = np.full(nperseg // 2 + 1, 2.0) / (count * window.sum() ** 2)
+    scale[0] /= 2
+    if nperseg % 2 == 0:
+        scale[-1] /= 2
+    return Spectra(fs, nperseg, s_uu * scale, s_yu * scale, s_yy * scale, "h1", 2 * (length // nperseg) - 1)
 
 
 def response(spectra: Spectra, band: tuple[float, float]) -> FrequencyResponse:
