@@ -218,3 +218,14 @@ def test_renders_offline_in_a_headless_browser(ff_report, tmp_path):
     assert image.shape == (2000, 1280)
     # A rendered page has text and figures: many dark pixels on a light background, not a blank page.
     assert image.mean() > 180 and np.mean(image < 100) > 0.005
+
+
+def test_decay_caption_stops_at_the_numerical_floor():
+    """A response that is zero to double precision reads 'more than 300 dB below', never '-6401 dB'."""
+    from sysid.model import Model
+    from sysid.report.model_figures import decay_label, transient_decay_db
+
+    fast = Model(path="fb", fs=44100.0, A=[[0.5]], B=[[1.0]], C=[[1.0]], D=[[0.0]])
+    decay = transient_decay_db(fast, 3.0)
+    assert decay_label(decay) == "more than 300 dB below its peak"
+    assert decay_label(-72.4) == "72 dB below its peak"

@@ -136,8 +136,8 @@ def _model_figures(data: ReportData) -> list[ReportFigure]:
                      lambda dpi: modelfig.pole_zero_figure(model, dpi=dpi)),
         ReportFigure("impulse-response", "model",
                      f"Seed figs. 4.3/4.6. Left: the first milliseconds (a non-minimum-phase path starts in the opposite "
-                     f"direction). Right: decay in dB; at {data.transient_s:g} s the response is {decay:.0f} dB below its "
-                     f"peak, so dropping the first {data.transient_s:g} s of the noise recording as transient is "
+                     f"direction). Right: decay in dB; at {data.transient_s:g} s the response is "
+                     f"{modelfig.decay_label(decay)}, so dropping the first {data.transient_s:g} s of the noise recording as transient is "
                      f"{'justified' if decay < -60 else 'NOT justified: the slowest mode is still ringing'} "
                      "(criterion: below -60 dB).",
                      lambda dpi: modelfig.impulse_response_figure(model, data.transient_s, dpi=dpi)),

@@ -109,6 +109,18 @@ def impulse_response(model, seconds: float) -> np.ndarray:
     return model.simulate(impulse)
 
 
+# Below this the response is zero to double precision (2^-52 relative is -313 dB): a figure
+# such as "-6401 dB" is rounding noise, not a decay.
+NUMERICAL_FLOOR_DB = -300.0
+
+
+def decay_label(decay_db: float) -> str:
+    """A decay in words: '72 dB below its peak', or 'more than 300 dB below its peak' at the numerical floor."""
+    if not decay_db > NUMERICAL_FLOOR_DB:
+        return f"more than {-NUMERICAL_FLOOR_DB:.0f} dB below its peak"
+    return f"{-decay_db:.0f} dB below its peak" if decay_db <= 0 else f"{decay_db:.0f} dB above its peak"
+
+
 def transient_decay_db(model, transient_s: float = 3.0, response: np.ndarray | None = None) -> float:
     """Envelope of the impulse response at transient_s (s), in dB relative to its peak.
 
@@ -153,7 +165,8 @@ def impulse_response_figure(model, transient_s: float = 3.0, short_ms: float = 5
                      label=f"slowest mode r^k, r = {radius:.5f}")
     decay = transient_decay_db(model, transient_s, long)
     axes[1].axvline(transient_s, color="0.3", ls=":", lw=1.0)
-    axes[1].annotate(f"{decay:.0f} dB at {transient_s:g} s", (transient_s, decay), fontsize=8, xytext=(-90, 12),
+    shown = max(decay, NUMERICAL_FLOOR_DB)
+    axes[1].annotate(f"{shown:.0f} dB at {transient_s:g} s", (transient_s, shown), fontsize=8, xytext=(-90, 12),
                      textcoords="offset points", arrowprops={"arrowstyle": "->", "lw": 0.6})
     finite = blocks[np.isfinite(blocks)]
     axes[1].set_ylim(max(-320.0, float(finite.min()) - 10 if finite.size else -200.0), 5)
