@@ -36,6 +36,7 @@ EXAMPLES = {
               "--sweep session/sweep2.wav -o fb_report.html",
     "demo": "helmet-anc demo demo_output",
     "batch": "helmet-anc batch sessions.csv -o batch_output",
+    "design": "helmet-anc design --fb fb_model.json --ff ff_model.json --disturbance ride.wav -o controller.json",
     "generate-firmware": "helmet-anc generate-firmware fb_model.json -o fb_firmware",
 }
 

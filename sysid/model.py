@@ -53,7 +53,7 @@ def _numeric(value, name: str) -> np.ndarray:
 def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     try:
         array = np.array(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ModelError(f"{name} matrix is not numeric") from None
     if array.ndim == 0 and shape == (1, 1):
         array = array.reshape(1, 1)
@@ -143,7 +143,7 @@ class Model:
         B, C = _numeric(self.B, "B"), _numeric(self.C, "C")
         self.B = _matrix(B.reshape(-1, 1) if B.size else np.zeros((n, 1)), "B", (n, 1))
         self.C = _matrix(C.reshape(1, -1) if C.size else np.zeros((1, n)), "C", (1, n))
-        self.D = _matrix(self.D, "D", (1, 1))
+        self.D = _matrix(_numeric(self.D, "D"), "D", (1, 1))
         for label in ("A", "B", "C", "D"):
             largest = float(np.max(np.abs(getattr(self, label)), initial=0.0))
             if largest > MAX_COEFFICIENT:
@@ -153,7 +153,7 @@ class Model:
                 or not math.isfinite(float(min(self.delay, 1e300))) or int(self.delay) != self.delay or self.delay < 0:
             raise ModelError(f"delay must be a non-negative whole number of samples; found {self.delay!r}")
         if self.delay > MAX_DELAY_S * self.fs:
-            raise ModelError(f"delay of {self.delay:g} samples is above the limit of {MAX_DELAY_S:g} s "
+            raise ModelError(f"delay of {int(self.delay)} samples is above the limit of {MAX_DELAY_S:g} s "
                              f"({MAX_DELAY_S * self.fs:.0f} samples at {self.fs:g} Hz)")
         self.delay = int(self.delay)
         if self.input_nonlinearity is not None:
