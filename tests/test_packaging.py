@@ -14,11 +14,26 @@ def _config():
     return tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 
+# The top-level import packages of the distribution (codegen.templates lives in templates/).
+TOP_PACKAGES = ("helmet_anc", "sysid", "codegen", "anc", "batch")
+
+
+def _package_folders() -> set[str]:
+    """Dotted names of every folder with an ``__init__.py`` under the top-level packages."""
+    return {".".join(p.parent.relative_to(ROOT).parts) for top in TOP_PACKAGES
+            for p in (ROOT / top).rglob("__init__.py") if "__pycache__" not in p.parts}
+
+
 def test_every_package_folder_is_listed():
     listed = set(_config()["tool"]["setuptools"]["packages"])
-    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("helmet_anc", "sysid", "codegen")
-             for p in (ROOT / top).rglob("__init__.py") if "__pycache__" not in p.parts}
+    found = _package_folders()
     assert found <= listed, f"packages missing from pyproject.toml: {sorted(found - listed)}"
+
+
+def test_every_top_level_package_is_scanned():
+    # A new top-level package (as anc and batch were) must join TOP_PACKAGES, or the check above misses it.
+    tops = {p.parent.name for p in ROOT.glob("*/__init__.py")} - {"tests", "templates"}
+    assert tops <= set(TOP_PACKAGES), f"top-level packages not in TOP_PACKAGES: {sorted(tops - set(TOP_PACKAGES))}"
 
 
 def test_templates_are_shipped_as_package_data():
