@@ -1,0 +1,70 @@
+"""Instruction counts from the QEMU trace (codegen.qemu_cost) on loops of known length.
+
+Needs ``arm-none-eabi-gcc`` and ``qemu-system-arm``; skipped with the reason otherwise.
+"""
+
+import pytest
+
+from codegen.errors import BuildError
+from codegen.qemu_cost import RegionCounts, build_m4_elf, count_regions, have_m4_tools, per_sample_cost
+
+missing = have_m4_tools()
+needs_m4 = pytest.mark.skipif(missing is not None, reason=f"needs {missing} (apt-get install gcc-arm-none-eabi "
+                                                           "libnewlib-arm-none-eabi qemu-system-arm)")
+
+# Three instructions per iteration, written in assembly so the compiler cannot change them:
+# subs, nop, bne (the last iteration's bne falls through and still counts).
+KNOWN_LOOP = r"""
+#include <stdint.h>
+#include "cost_mark.h"
+__attribute__((noinline)) static void spin(uint32_t n)
+{
+    __asm__ volatile("1:\n\tsubs %0, %0, #1\n\tnop\n\tbne 1b" : "+r"(n) : : "cc");
+}
+int main(void)
+{
+    cost_mark();
+    spin(10u);
+    cost_mark();
+    spin(110u);
+    cost_mark();
+    cost_mark();
+    return 0;
+}
+"""
+
+
+@needs_m4
+def test_known_loop_counts_three_instructions_per_iteration(tmp_path):
+    (tmp_path / "loop.c").write_text(KNOWN_LOOP)
+    counts = count_regions(build_m4_elf([tmp_path / "loop.c"], tmp_path))
+    assert len(counts.regions) == 3
+    # 100 more iterations of 3 instructions, everything else equal.
+    assert counts.regions[1] - counts.regions[0] == 300
+    assert per_sample_cost(counts, 10, 110) == 3.0
+    # An empty region: the marker's bx lr, then the call into the next marker (bl).
+    assert counts.regions[2] == 2
+    assert counts.exit_status == 0
+
+
+@needs_m4
+def test_failing_program_is_an_error(tmp_path):
+    (tmp_path / "fail.c").write_text('#include "cost_mark.h"\nint main(void) { cost_mark(); return 3; }\n')
+    with pytest.raises(BuildError, match="exited with status 3"):
+        count_regions(build_m4_elf([tmp_path / "fail.c"], tmp_path))
+
+
+@needs_m4
+def test_compile_error_names_the_file(tmp_path):
+    (tmp_path / "bad.c").write_text("int main(void) { return undefined_name; }\n")
+    with pytest.raises(BuildError, match="Cortex-M4 build of cost.elf failed: .*undefined_name"):
+        build_m4_elf([tmp_path / "bad.c"], tmp_path)
+
+
+def test_per_sample_cost_needs_two_regions_and_growing_counts():
+    counts = RegionCounts(regions=(50, 350), exit_status=0, total=1000)
+    assert per_sample_cost(counts, 10, 110) == 3.0
+    with pytest.raises(ValueError, match="long"):
+        per_sample_cost(counts, 110, 10)
+    with pytest.raises(ValueError, match="regions 1 and 2"):
+        per_sample_cost(counts, 10, 110, first=1)
