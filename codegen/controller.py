@@ -1,0 +1,222 @@
+"""C code of a controller (format helmet-anc/controller@1) for the board's control path.
+
+:func:`plan_controller` designs three filters with the model filters' pipeline
+(:func:`codegen.plan.plan_firmware`: balanced realisation, sections, scaling, Q15 with error
+feedback and float32 variants, the same refusals): ``ctl_s`` the internal model S_model,
+``ctl_q`` the feedback filter Q and ``ctl_w`` the feed-forward filter W (each only when the
+controller has it). :func:`generate_controller_firmware` renders them with the model
+templates, adds ``controller_config.h`` (latency and which filters exist, read by
+``firmware/anc_control.h``) and writes the folder with its manifest.
+
+Worst-case headroom (:func:`headroom`): for a filter H with impulse response h, a
+sequence bounded by 1 in magnitude gives outputs bounded by ||h||_1 = sum |h[n]|, and the
+sequence sign(h[N - n]) reaches the bound (the L1 norm is the exact worst case, where the
+L-infinity scaling of the sections covers sines only). Per filter and per section output
+this gives the largest input peak (dBFS) that no input of that peak can saturate; for the
+drive y = Q d_hat + W x, ||Q||_1 + ||W||_1; for the disturbance estimate
+d_hat = e - S_model y, 1 + ||S_model||_1 ||y||_inf. Beyond these levels the generated
+code saturates (never wraps) and the limiter of the control path watches the rails.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sysid.files import OutputRefused, check_output_directory
+from sysid.model import Model
+
+from . import __version__
+from .errors import CodegenError, OutputError
+from .plan import Plan, plan_firmware
+from .render import build_context, render_files, write_directory
+from .sections import impulse_l1
+
+__all__ = ["CONTROL_BLOCK_MAX", "FILTER_NAMES", "ControllerPlan", "format_headroom_table",
+           "generate_controller_firmware", "headroom", "plan_controller"]
+
+# Names of the generated filters: the runtime's control path includes them by these names.
+FILTER_NAMES = {"model": "ctl_s", "fb": "ctl_q", "ff": "ctl_w"}
+# The control path's processing latency is 2 blocks of 1 to 4 frames (firmware/anc_control.h).
+CONTROL_BLOCK_MAX = 4
+PROCESSING_LATENCY_MIN = 2
+_LABELS = {"model": "internal model S", "fb": "controller Q", "ff": "controller W"}
+
+
+@dataclass
+class ControllerPlan:
+    """The plans of the controller's filters (keys 'model', 'fb', 'ff'), its latency and headroom."""
+
+    controller: object
+    plans: dict[str, Plan]
+    latency_samples: int
+    controller_file: str | None = None
+    headroom: dict = field(default_factory=dict)
+
+    def fixed(self, part: str):
+        return self.plans[part].fixed if part in self.plans else None
+
+    def floating(self, part: str):
+        return self.plans[part].floating if part in self.plans else None
+
+
+def _filter_model(filt, fs: float, path: str) -> Model:
+    return Model(path=path, fs=fs, A=np.asarray(filt.A, float), B=np.asarray(filt.B, float),
+                 C=np.asarray(filt.C, float), D=np.asarray(filt.D, float))
+
+
+def _db(value: float) -> float:
+    return 20.0 * math.log10(value) if value > 0 else float("-inf")
+
+
+def _filter_headroom(plan: Plan) -> dict:
+    """L1 gains of the cascade and of each partial cascade (section outputs), and the
+    largest input peak (dBFS) that cannot saturate any of them."""
+    sections = plan.cascade.sections
+    nodes = [impulse_l1(sections[: k + 1], [p for s in sections[: k + 1] for p in s.poles])
+             for k in range(len(sections))]
+    peak = max(nodes)
+    return {"l1_gain": nodes[-1], "node_l1_gains": nodes, "peak_gain_linf": plan.cascade.node_gains[-1],
+            "safe_input_peak_dbfs": min(0.0, -_db(peak))}
+
+
+def headroom(plans: dict[str, Plan]) -> dict:
+    """Worst-case headroom of the control path (module docstring): per filter and for the
+    drive and the disturbance estimate with full-scale microphones."""
+    result = {part: _filter_headroom(plan) for part, plan in plans.items()}
+    drive = sum(result[p]["l1_gain"] for p in ("fb", "ff") if p in result)
+    s_gain = result["model"]["l1_gain"]
+    result["drive"] = {"worst_case_peak": drive, "margin_db": -_db(drive) if drive > 0 else float("inf"),
+                       "saturates": drive > 1.0}
+    estimate = 1.0 + s_gain * min(drive, 1.0)
+    result["d_hat"] = {"worst_case_peak": estimate, "margin_db": -_db(estimate), "saturates": estimate > 1.0}
+    return result
+
+
+def plan_controller(controller, *, variant: str = "both", min_snr: float = 30.0, quantiser: str = "efb",
+                    controller_file: str | None = None) -> ControllerPlan:
+    """Plans of S_model, Q and W at the controller's rate; raises a CodegenError on refusal.
+
+    ``controller`` is an :class:`anc.controller.Controller` or a path to its JSON. The
+    controller's latency must cover the control path's processing latency (2 samples
+    at the least: capture, compute, play; firmware/anc_control.h).
+    """
+    from anc.controller import Controller
+
+    if not isinstance(controller, Controller):
+        controller_file = str(controller)
+        controller = Controller.load(controller)
+    if controller.fb is None and controller.ff is None:
+        raise CodegenError(f"{controller_file or 'controller'}: has neither a feedback (fb) nor a feed-forward (ff) "
+                           "filter; there is nothing to run")
+    if controller.latency_samples < PROCESSING_LATENCY_MIN:
+        raise CodegenError(f"{controller_file or 'controller'}: latency_samples {controller.latency_samples} is below "
+                           f"the board's {PROCESSING_LATENCY_MIN}-sample control path (capture, compute, play); design "
+                           f"it again with --latency {PROCESSING_LATENCY_MIN}")
+    plans = {}
+    parts = {"model": controller.internal_model, "fb": controller.fb, "ff": controller.ff}
+    for part, source in parts.items():
+        if source is None:
+            continue
+        model = source if part == "model" else _filter_model(source, controller.fs, "fb" if part == "fb" else "ff")
+        try:
+            plans[part] = plan_firmware(model, variant=variant, min_snr=min_snr, quantiser=quantiser)
+        except CodegenError as exc:
+            raise type(exc)(f"{_LABELS[part]}: {exc}") from None
+    return ControllerPlan(controller=controller, plans=plans, latency_samples=int(controller.latency_samples),
+                          controller_file=controller_file, headroom=headroom(plans))
+
+
+def _config_header(plan: ControllerPlan, controller_hash: str) -> str:
+    from .render import _environment
+
+    context = {
+        "banner": f"Generated by helmet-anc codegen {__version__} from controller {controller_hash}; do not edit.",
+        "latency": plan.latency_samples,
+        "has_q": int("fb" in plan.plans),
+        "has_w": int("ff" in plan.plans),
+        "fs_int": round(plan.controller.fs),
+        "drive_margin_db": format(plan.headroom["drive"]["margin_db"], ".1f"),
+        "drive_peak": format(plan.headroom["drive"]["worst_case_peak"], ".4g"),
+    }
+    return _environment().get_template("controller_config.h.j2").render(context)
+
+
+def _provenance(plan: Plan, part: str, controller_hash: str) -> dict:
+    provenance = dict(plan.provenance)
+    if part != "model":
+        provenance.update(path=_LABELS[part].replace(" ", "_"), hash=controller_hash)
+    return provenance
+
+
+def generate_controller_firmware(controller, outdir, *, variant: str = "both", min_snr: float = 30.0,
+                                 quantiser: str = "efb", force: bool = False, progress=None):
+    """Generate the control path's filters of ``controller`` into ``outdir``; returns the
+    :class:`codegen.api.Manifest`. The output-folder rules are those of ``generate_firmware``."""
+    from .api import MANIFEST_FORMAT, Manifest, _json_ready, _manifest_data
+
+    try:
+        check_output_directory(outdir, "manifest.json", MANIFEST_FORMAT, force=force)
+    except OutputRefused as exc:
+        raise OutputError(str(exc)) from None
+    if progress is not None:
+        progress(0, 3, "design")
+    plan = plan_controller(controller, variant=variant, min_snr=min_snr, quantiser=quantiser)
+    text = json.dumps(plan.controller.to_dict(), sort_keys=True)
+    controller_hash = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    if progress is not None:
+        progress(1, 3, "render")
+    files: dict[str, str] = {}
+    filters = {}
+    for part, sub in plan.plans.items():
+        name = FILTER_NAMES[part]
+        context = build_context(name=name, provenance=_provenance(sub, part, controller_hash), fs=sub.realisation.fs,
+                                cascade=sub.cascade, variants=tuple(sub.predictions), fixed=sub.fixed,
+                                floating=sub.floating)
+        rendered = render_files(context)
+        files.update(rendered)
+        filters[name] = _manifest_data(sub, name, variant, rendered, None)
+    files["controller_config.h"] = _config_header(plan, controller_hash)
+    data = {
+        "format": MANIFEST_FORMAT,
+        "generator": f"helmet-anc codegen {__version__}",
+        "name": "controller",
+        "kind": "controller",
+        "controller": {"file": plan.controller_file, "sha256": controller_hash, "fs": plan.controller.fs,
+                       "latency_samples": plan.latency_samples},
+        "filters": filters,
+        "headroom": plan.headroom,
+        "verification": None,
+        "files": {n: hashlib.sha256(t.encode("utf-8")).hexdigest() for n, t in files.items()},
+    }
+    data = _json_ready(data)
+    manifest_text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False, default=float) + "\n"
+    if progress is not None:
+        progress(2, 3, "write")
+    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text}, force=force)
+    if progress is not None:
+        progress(3, 3, "done")
+    return Manifest(outdir=Path(outdir), data=data)
+
+
+def format_headroom_table(headroom_data: dict) -> str:
+    """Plain-text worst-case headroom table of a controller manifest's ``headroom``."""
+    lines = [f"{'signal':<22} {'L1 gain':>10} {'peak gain':>10} {'safe input':>12}",
+             "-" * 57]
+    for part in ("model", "fb", "ff"):
+        if part not in headroom_data:
+            continue
+        row = headroom_data[part]
+        lines.append(f"{FILTER_NAMES[part] + ' (' + _LABELS[part] + ')':<22} {row['l1_gain']:>10.4g} "
+                     f"{row['peak_gain_linf']:>10.4g} {row['safe_input_peak_dbfs']:>9.1f}dBFS")
+    for key, label in (("drive", "drive Q d_hat + W x"), ("d_hat", "d_hat = e - S y")):
+        row = headroom_data[key]
+        verdict = "saturates" if row["saturates"] else "never saturates"
+        lines.append(f"{label:<22} worst-case peak {row['worst_case_peak']:.4g} of full scale with full-scale "
+                     f"inputs ({row['margin_db']:+.1f} dB): {verdict}")
+    return "\n".join(lines)
