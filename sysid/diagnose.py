@@ -82,7 +82,8 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
     for detector in DETECTORS:
         found = detector(ctx)
         findings.extend(found if isinstance(found, list) else [found])
-    findings.sort(key=lambda f: (not f["significant"], -f["score"]))
+    # A finding that biases the others' linear reference (a long missing delay) leads; then by score.
+    findings.sort(key=lambda f: (not f["significant"], not f["evidence"].get("leads", False), -f["score"]))
     return Diagnosis(findings, comparison, time.perf_counter() - t0)
 
 

@@ -171,7 +171,10 @@ def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient
     # modelled) to two above it (the added structure, not more order, should explain the data).
     min_order = model.order if min_order is None else min_order
     orders = tuple(n for n in options.orders if min_order <= n <= model.order + extra_order) or (model.order,)
-    options = IdentificationOptions(**{**options.__dict__, "transient_s": transient_s, "orders": orders})
+    # The core is fitted behind the model's own delay (input_map applies it): a latency found
+    # again here would be dropped with the core, and a missing delay is the delay step's to add.
+    options = IdentificationOptions(**{**options.__dict__, "transient_s": transient_s, "orders": orders,
+                                       "latency": False})
     return identify(recordings[0], recordings[1:], model.path, options).model
 
 
@@ -468,10 +471,16 @@ class AutoRefinement:
 
 
 def _step_key(spec: EffectSpec, model: Model) -> str:
-    """What makes two steps the same: effect and parameters (more order: also the order it starts from)."""
-    start = {"order": model.order} if spec.kind == "under-modelled" else {}
-    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()}, **start},
-                      sort_keys=True)
+    """What makes two steps the same: effect and parameters, and the model they start from (its history)."""
+    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()},
+                       "order": model.order, "from": len(model.history)}, sort_keys=True)
+
+
+def _allowed(effect: str, rejected: dict[str, int], retried: set[str], accepted: int) -> bool:
+    """May ``effect`` be tried? A rejected effect stays rejected, except once: when a step accepted
+    after its rejection changed the model (e.g. a delay added after a nonlinearity was judged
+    against a linear part that lacked it), the effect is tried one more time."""
+    return effect not in rejected or (rejected[effect] < accepted and effect not in retried)
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
@@ -481,20 +490,24 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     A step is kept only if it lowers the validation rms by more than the run-to-run
     noise of that figure (``Comparison.run_to_run``, from the two sweeps; at least
     ``RUN_TO_RUN_MIN`` of it). An effect whose step is not kept (or fails) stays
-    rejected, no step (effect and parameters) is tried twice, and there are at most
+    rejected (tried at most once more after a later accepted step changed the model), no
+    step (effect and parameters from the same model) is tried twice, and there are at most
     ``max_steps`` steps. ``stop_reason`` says why it stopped: "at the floor",
     "nothing left that lowers the error", "effects that cannot be modelled: ...".
     """
     start = current = compare(model, sweeps)
     steps: list[RefinementStep] = []
-    rejected: set[str] = set()
+    rejected: dict[str, int] = {}  # effect -> accepted steps before it was rejected
+    retried: set[str] = set()
     tried: set[str] = set()
     stop_reason = f"step limit ({max_steps} steps)"
     while len(steps) < max_steps:
         at_floor = current.ratio <= AT_FLOOR
         diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
         unmodellable = [f["effect"] for f in diagnosis.significant if f["effect"] not in AUTO_EFFECTS]
-        candidates = [f for f in diagnosis.significant if f["effect"] in AUTO_EFFECTS and f["effect"] not in rejected]
+        accepted = sum(1 for step in steps if step.accepted)
+        candidates = [f for f in diagnosis.significant
+                      if f["effect"] in AUTO_EFFECTS and _allowed(f["effect"], rejected, retried, accepted)]
         if at_floor:
             # At the floor in band; only a data correction (an offset at DC) can still lower the error.
             candidates = [f for f in candidates if f["effect"] in _CORRECTIONS]
@@ -508,7 +521,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         candidates.sort(key=lambda f: f["effect"] not in _CORRECTIONS)
         specs = [(f, _auto_spec(f)) for f in candidates]
         specs = [(f, spec) for f, spec in specs if _step_key(spec, model) not in tried]
-        if not specs and not at_floor and "under-modelled" not in rejected:
+        if not specs and not at_floor and _allowed("under-modelled", rejected, retried, accepted):
             # Everything named was tried and the error is still above the floor: more order is what is
             # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
             fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
@@ -519,6 +532,8 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             break
         found, spec = specs[0]
         tried.add(_step_key(spec, model))
+        if spec.kind in rejected:
+            retried.add(spec.kind)
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
             result = refine(model, noise, sweeps, spec, options, transient_s, current)
@@ -527,7 +542,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             steps.append(RefinementStep(spec.kind, dict(spec.params), current.rms, current.rms, current.noise_floor,
                                         current.noise_floor, model.order, model.order, accepted=False,
                                         score=found["score"], note=str(exc)))
-            rejected.add(spec.kind)
+            rejected[spec.kind] = accepted
             continue
         step = result.step
         step.score = found["score"]
@@ -543,8 +558,9 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             step.accepted = result.after.rms <= current.rms + needed
         if not step.accepted:
             step.note = (f"lowered the rms by {current.rms - result.after.rms:.2e} FS, not more than the run-to-run "
-                         f"noise {needed:.2e} FS" if result.after.rms < current.rms else "validation error rose")
-            rejected.add(spec.kind)
+                         f"noise {needed:.2e} FS" if result.after.rms < current.rms else
+                         "validation error unchanged" if result.after.rms == current.rms else "validation error rose")
+            rejected[spec.kind] = accepted
         steps.append(step)
         if step.accepted:
             model = result.model

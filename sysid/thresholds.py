@@ -9,7 +9,7 @@ otherwise. Detectors and ``refine`` import them from here, so the meaning of
 from __future__ import annotations
 
 __all__ = ["AT_FLOOR", "EXCESS", "UNDER_MODELLED_EXCESS", "EXPLAINS_GAIN", "FACTOR_EXPLAINS", "WORSE",
-           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN"]
+           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG"]
 
 # Validation rms at most this many times the noise floor counts as at the floor.
 AT_FLOOR = 1.2
@@ -21,6 +21,10 @@ UNDER_MODELLED_EXCESS = 2.0
 EXPLAINS_GAIN = 1.25
 # A series factor that brings the sweeps this close to the floor settles a tie with a delay.
 FACTOR_EXPLAINS = 2.0
+# A missing delay whose excess phase at the top of the validation band exceeds this (degrees) ranks
+# first: every detector that judges the residual against the model's linear prediction (the input
+# polynomial, more order, a series factor) sees the delay's misfit as well, so it is added first.
+LEADING_PHASE_DEG = 90.0
 # ``refine --add``: a refinement that raises the validation rms by more than this is called worse.
 WORSE = 1.02
 

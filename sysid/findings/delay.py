@@ -18,7 +18,8 @@ from threadpoolctl import threadpool_limits
 from .. import lti
 from ..output_error import BlockData, block_data, linear_cost, refine_output_error
 from ..recordings import Recording
-from ..validation import rms_from_responses, sweep_spectrum
+from ..thresholds import LEADING_PHASE_DEG
+from ..validation import VALIDATION_BAND, rms_from_responses, sweep_spectrum
 from . import SPEED_OF_SOUND, DiagnosisContext, finding
 from .dynamics import arbitrate
 
@@ -132,6 +133,8 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
             significant = refit_gain >= REFIT_GAIN
             ratio = max(ratio, COST_RATIO * refit_gain / REFIT_GAIN)
     microseconds = 1e6 * extra / model.fs
+    # Excess phase of the missing delay at the top of the validation band (effects.md: linear in f).
+    excess_phase = 360.0 * VALIDATION_BAND[1] * max(extra, 0) / model.fs
     centimetres = 100.0 * SPEED_OF_SOUND * extra / model.fs
     if extra >= 1:
         explanation = (f"the model fits best with {extra} more sample(s) of delay ({microseconds:.0f} us): about "
@@ -142,6 +145,7 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
     ctx.cache["delay_finding"] = finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
                    {"samples": extra, "total_samples": best, "microseconds": microseconds, "sound_path_cm": centimetres},
                    explanation, f"refine --add delay:{extra}" if extra >= 1 else "none",
-                   {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain})
+                   {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain,
+                    "excess_phase_deg": excess_phase, "leads": bool(significant and excess_phase >= LEADING_PHASE_DEG)})
     arbitrate(ctx.cache["delay_finding"], ctx)
     return ctx.cache["delay_finding"]
