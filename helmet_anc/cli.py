@@ -14,6 +14,7 @@ import sys
 import warnings
 
 from . import commands as command_package
+from .pipes import quiet_on_closed_stdout
 from sysid.errors import HelmetAncError
 from sysid.recordings import RecordingWarning
 
@@ -88,6 +89,11 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def main(argv=None) -> int:
+    """Run ``helmet-anc`` with ``argv`` (default: the process's arguments); return the exit status."""
+    return quiet_on_closed_stdout(lambda: _main(argv))
+
+
+def _main(argv) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     leading = 0
     while leading < len(argv) and argv[leading] in ("-q", "--quiet"):

@@ -15,6 +15,7 @@ from codegen.api import format_verification_table, generate_firmware
 from codegen.errors import CodegenError
 from codegen.plan import TARGETS, VARIANTS
 from sysid.grid import terminal_progress
+from .pipes import quiet_on_closed_stdout
 
 __all__ = ["build_parser", "main"]
 
@@ -60,6 +61,11 @@ def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
 
 
 def main(argv=None, prog: str = "generate-firmware") -> int:
+    """Run the command with ``argv`` (default: the process's arguments); return the exit status."""
+    return quiet_on_closed_stdout(lambda: _main(argv, prog))
+
+
+def _main(argv, prog: str) -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     if args.verify and not args.sweep:

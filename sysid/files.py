@@ -26,8 +26,9 @@ from typing import Callable, Iterable
 from .errors import HelmetAncError
 
 __all__ = ["OutputRefused", "atomic_write", "atomic_write_bytes", "atomic_write_text", "check_output_directory",
-           "check_output_file",
-           "is_ours", "read_manifest", "sha256_text", "staged_directory", "write_output_directory"]
+           "check_output_file", "check_output_tree", "foreign_files", "is_ours", "publish_tree", "read_manifest",
+           "read_tree_manifest", "sha256_text", "staged_directory", "staged_output_tree", "tree_manifest_text",
+           "write_output_directory"]
 
 # Every JSON file helmet-anc writes carries a "format" beginning with this tag.
 FORMAT_PREFIX = "helmet-anc/"
@@ -293,3 +294,153 @@ def write_output_directory(outdir: str | os.PathLike, files: dict[str, str | byt
     content = files[manifest_name]
     atomic_write_bytes(outdir / manifest_name, content.encode("utf-8") if isinstance(content, str) else content)
     return outdir
+
+
+# -- output trees (folders with sub-folders) -------------------------------------
+
+def _tree_files(folder: Path) -> list[str]:
+    """Every file (and symbolic link) under ``folder``, as sorted relative POSIX paths."""
+    found = []
+    for root, folders, files in os.walk(folder):
+        base = Path(root)
+        found.extend((base / name).relative_to(folder).as_posix() for name in files)
+        # Links to folders are entries of ours or not, like files; never followed.
+        found.extend((base / name).relative_to(folder).as_posix() for name in folders if (base / name).is_symlink())
+    return sorted(found)
+
+
+def read_tree_manifest(folder: Path, manifest_name: str, format_tag: str) -> dict | None:
+    """The ``{relative path: sha256}`` list of our manifest of a folder tree, or None when there is none of ours."""
+    try:
+        data = json.loads((Path(folder) / manifest_name).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    files = data.get("files") if isinstance(data, dict) else None
+    if data.get("format") != format_tag or not isinstance(files, dict):
+        return None
+    for name, digest in files.items():
+        parts = name.split("/") if isinstance(name, str) else [""]
+        if not isinstance(digest, str) or name.startswith("/") or any(p in ("", ".", "..") for p in parts):
+            return None
+    return files
+
+
+def foreign_files(folder: Path, manifest_name: str, format_tag: str,
+                  ours: Callable[[Path], bool] | None = None) -> tuple[dict, list[str]]:
+    """Our manifest's file list for the tree ``folder`` ({} when none), and the files it does not account for.
+
+    A file is ours when the manifest lists it with its current SHA-256 (edited since: the
+    user's now), or, not listed, when ``ours(path)`` says so (e.g. a format tag).
+    """
+    listed = read_tree_manifest(folder, manifest_name, format_tag) or {}
+    foreign = []
+    for name in _tree_files(folder):
+        path = folder / name
+        if name == manifest_name and listed:
+            continue
+        if name in listed:
+            if path.is_symlink() or not path.is_file() or sha256_text(path.read_bytes()) != listed[name]:
+                foreign.append(name)
+        elif ours is None or path.is_symlink() or not ours(path):
+            foreign.append(name)
+    return listed, foreign
+
+
+def _shown(names: list[str]) -> str:
+    return ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+
+
+def check_output_tree(outdir: str | os.PathLike, manifest_name: str, format_tag: str, force: bool = False,
+                      option: str = "-o", ours: Callable[[Path], bool] | None = None) -> Path:
+    """Check an output folder tree before any work: new, or holding only our previous output, or ``force``.
+
+    As :func:`check_output_directory`, for a folder with sub-folders; with ``force``
+    the files that are not ours stay where they are and are never replaced
+    (:func:`publish_tree` refuses to write over one).
+    """
+    outdir = Path(outdir)
+    if not outdir.exists() or not outdir.is_dir():
+        return check_output_directory(outdir, manifest_name, format_tag, force, option)
+    if not os.access(outdir, os.W_OK | os.X_OK):
+        raise OutputRefused(f"{option} {outdir}: folder is not writable")
+    listed, foreign = foreign_files(outdir, manifest_name, format_tag, ours)
+    if foreign and not force:
+        what = "holds files not in our manifest" if listed else "holds files helmet-anc did not write"
+        raise OutputRefused(f"{option} {outdir}: {what} ({_shown(foreign)}); give a new folder, or --force to "
+                            "write beside them (they are never replaced or removed)")
+    return outdir
+
+
+def tree_manifest_text(folder: Path, format_tag: str, exclude=()) -> str:
+    """Our manifest of every file under ``folder`` (relative path -> SHA-256) but ``exclude``, as JSON text."""
+    files = {name: sha256_text((folder / name).read_bytes()) for name in _tree_files(folder)
+             if name not in exclude and not (folder / name).is_symlink()}
+    return json.dumps({"format": format_tag, "files": files}, indent=2, sort_keys=True) + "\n"
+
+
+def publish_tree(staging: Path, outdir: Path, manifest_name: str, format_tag: str, option: str = "-o",
+                 ours: Callable[[Path], bool] | None = None) -> Path:
+    """Move the finished tree ``staging`` to ``outdir``, with our manifest of it; return ``outdir``.
+
+    A new ``outdir`` is the renamed ``staging``: complete or absent. Into an existing
+    one (allowed by :func:`check_output_tree`), each file is renamed over its
+    namesake, the manifest last; files the previous manifest listed and the new tree
+    does not are removed; a file that is not ours is never replaced (OutputRefused
+    before anything moves) and nothing else is touched.
+    """
+    (staging / manifest_name).write_text(tree_manifest_text(staging, format_tag, exclude=(manifest_name,)))
+    if not outdir.exists():
+        try:
+            os.replace(staging, outdir)
+        except OSError as exc:
+            raise OutputRefused(f"{option} {outdir}: cannot write ({exc.strerror or exc})") from None
+        return outdir
+    previous, foreign = foreign_files(outdir, manifest_name, format_tag, ours)
+    new = _tree_files(staging)
+    clash = sorted(set(foreign) & set(new))
+    if clash:
+        raise OutputRefused(f"{option} {outdir}: would replace files helmet-anc did not write ({_shown(clash)}); "
+                            "move them, or give a new folder; nothing was written")
+    for name in new:
+        if name != manifest_name:
+            (outdir / name).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(staging / name, outdir / name)
+    for name in previous:
+        if name not in new and name not in foreign:
+            _remove(outdir / name)
+    os.replace(staging / manifest_name, outdir / manifest_name)
+    shutil.rmtree(staging, ignore_errors=True)
+    return outdir
+
+
+class staged_output_tree:
+    """Context manager: build an output folder tree in a staging folder, then publish it.
+
+    ``with staged_output_tree(outdir, "manifest.json", tag, force) as work: ...`` checks
+    ``outdir`` first (:func:`check_output_tree`), yields an empty staging folder beside
+    it to fill, and on normal exit publishes it (:func:`publish_tree`). On any
+    exception, Ctrl-C included, the staging folder is removed and ``outdir`` is as it was.
+    """
+
+    def __init__(self, outdir: str | os.PathLike, manifest_name: str, format_tag: str, force: bool = False,
+                 option: str = "-o"):
+        self.outdir = check_output_tree(outdir, manifest_name, format_tag, force, option)
+        self.manifest_name, self.format_tag, self.option = manifest_name, format_tag, option
+        self.staging: Path | None = None
+
+    def __enter__(self) -> Path:
+        parent = _folder(self.outdir)
+        try:
+            self.staging = Path(tempfile.mkdtemp(prefix=f".{self.outdir.name}.", suffix=PARTIAL, dir=parent))
+        except OSError as exc:
+            raise OutputRefused(f"{self.option} {self.outdir}: cannot write in {parent} ({exc.strerror})") from None
+        os.chmod(self.staging, _default_mode(folder=True))
+        return self.staging
+
+    def __exit__(self, kind, value, traceback) -> bool:
+        try:
+            if kind is None:
+                publish_tree(self.staging, self.outdir, self.manifest_name, self.format_tag, self.option)
+        finally:
+            shutil.rmtree(self.staging, ignore_errors=True)
+        return False

@@ -140,3 +140,26 @@ def test_identify_writes_its_report_into_a_folder(session_files, tmp_path, capsy
     assert code == 0, err
     html = (tmp_path / "reports" / "ff-report.html").read_text()
     assert html.count("<img") >= 10 and "http://" not in html and "https://" not in html
+
+
+@pytest.mark.parametrize("command", [["helmet_anc.cli", "generate-firmware"], ["helmet_anc.firmware_cli"]])
+def test_output_into_a_closed_pipe_ends_quietly(command, tmp_path):
+    """``generate-firmware ... | head``: the reader is gone before the summary is printed; no traceback."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from helmet_anc.pipes import EXIT_BROKEN_PIPE
+    from sysid.plants import appendix_a_model
+
+    appendix_a_model("ff").save(tmp_path / "ff.json")
+    root = str(Path(__file__).resolve().parent.parent)
+    process = subprocess.Popen([sys.executable, "-m", *command, str(tmp_path / "ff.json"), "-o", str(tmp_path / "fw"),
+                                "--variant", "float", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               env={**os.environ, "PYTHONPATH": root}, cwd=tmp_path)
+    process.stdout.close()  # as head does once it has its lines
+    err = process.stderr.read().decode()
+    assert process.wait(timeout=300) == EXIT_BROKEN_PIPE, err
+    assert err == ""
+    assert (tmp_path / "fw" / "manifest.json").is_file()  # written whole before anything was printed

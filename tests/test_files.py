@@ -140,3 +140,79 @@ def test_a_manifest_cannot_name_files_outside_its_folder(tmp_path):
         check_output_directory(out, "manifest.json", TAG)
     write_output_directory(out, _output({"a.c": "1"}), "manifest.json", TAG, force=True)
     assert victim.read_text() == "keep"
+
+
+# -- output trees (the demo's OUTDIR) --------------------------------------------
+
+from sysid.files import OutputRefused as _Refused, staged_output_tree  # noqa: E402
+
+_TAG = "helmet-anc/test-tree@1"
+
+
+def _tree(folder, files):
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+
+
+def _contents(folder):
+    return {p.relative_to(folder).as_posix(): p.read_text() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_new_tree_appears_complete_with_its_manifest(tmp_path):
+    out = tmp_path / "out"
+    with staged_output_tree(out, "m.json", _TAG) as work:
+        _tree(work, {"a.txt": "1", "sub/b.txt": "2"})
+        assert not out.exists()
+    assert _contents(out).keys() == {"a.txt", "sub/b.txt", "m.json"}
+    assert sorted(json.loads((out / "m.json").read_text())["files"]) == ["a.txt", "sub/b.txt"]
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_a_rerun_replaces_and_removes_only_listed_files(tmp_path):
+    out = tmp_path / "out"
+    with staged_output_tree(out, "m.json", _TAG) as work:
+        _tree(work, {"a.txt": "1", "sub/old.txt": "2"})
+    with staged_output_tree(out, "m.json", _TAG) as work:
+        _tree(work, {"a.txt": "new", "sub/b.txt": "3"})
+    assert _contents(out) == {"a.txt": "new", "sub/b.txt": "3", "m.json": (out / "m.json").read_text()}
+
+
+def test_a_folder_with_a_file_not_ours_is_refused_and_left_alone_without_force(tmp_path):
+    out = tmp_path / "out"
+    with staged_output_tree(out, "m.json", _TAG) as work:
+        _tree(work, {"a.txt": "1"})
+    _tree(out, {"sub/notes.txt": "mine"})
+    before = _contents(out)
+    with pytest.raises(_Refused, match=r"holds files not in our manifest \(sub/notes.txt\).*--force"):
+        staged_output_tree(out, "m.json", _TAG)
+    (out / "a.txt").write_text("edited")  # edited since we wrote it: the user's now
+    with pytest.raises(_Refused, match="a.txt"):
+        staged_output_tree(out, "m.json", _TAG)
+    assert _contents(out) == {**before, "a.txt": "edited"}
+
+
+def test_with_force_files_not_ours_stay_and_are_never_replaced(tmp_path):
+    out = tmp_path / "out"
+    _tree(out, {"mine.txt": "mine", "sub/c.txt": "mine too"})
+    with staged_output_tree(out, "m.json", _TAG, force=True) as work:
+        _tree(work, {"a.txt": "1"})
+    assert _contents(out)["mine.txt"] == "mine" and _contents(out)["a.txt"] == "1"
+    before = _contents(out)
+    with pytest.raises(_Refused, match=r"would replace files helmet-anc did not write \(sub/c.txt\)"):
+        with staged_output_tree(out, "m.json", _TAG, force=True) as work:
+            _tree(work, {"a.txt": "2", "sub/c.txt": "ours"})
+    assert _contents(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no staging folder left
+
+
+def test_an_interrupted_tree_leaves_the_folder_as_it_was(tmp_path):
+    out = tmp_path / "out"
+    with staged_output_tree(out, "m.json", _TAG) as work:
+        _tree(work, {"a.txt": "1"})
+    before = _contents(out)
+    with pytest.raises(KeyboardInterrupt):
+        with staged_output_tree(out, "m.json", _TAG) as work:
+            _tree(work, {"a.txt": "2"})
+            raise KeyboardInterrupt
+    assert _contents(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["out"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sysid.channels import check_channel_order
 from sysid.errors import HelmetAncError
 from sysid.files import check_output_file
 from sysid.identify import Identification
@@ -12,7 +13,7 @@ from sysid.model import Model
 from sysid.recordings import load_recording
 from sysid.validation import check_repeats
 
-__all__ = ["add_recording_options", "add_force_option", "load_sweeps", "load_model", "check_output",
+__all__ = ["add_recording_options", "add_force_option", "load_sweeps", "check_channels", "load_model", "check_output",
            "check_report_target", "identification_summary"]
 
 
@@ -42,9 +43,19 @@ def _inputs(args) -> list[str]:
 def load_sweeps(args) -> list:
     if len(args.sweep) != 2:
         raise HelmetAncError(f"give --sweep exactly twice (the two repeated sweeps); found {len(args.sweep)}")
-    sweeps = [load_recording(p, args.input_channel, args.output_channel) for p in args.sweep]
+    sweeps = [check_channels(load_recording(p, args.input_channel, args.output_channel), args) for p in args.sweep]
     check_repeats(*sweeps)
     return sweeps
+
+
+def check_channels(recording, args):
+    """The recording (in memory), after refusing swapped input and ear channels (sysid.channels).
+
+    Every command that reads recordings reads the two sweeps through ``load_sweeps``, so
+    the sweeps are where a swapped session is caught; the message names the fix.
+    """
+    check_channel_order(recording.u, recording.y, recording.fs, recording.path, args.input_channel, args.output_channel)
+    return recording
 
 
 def load_model(path: str) -> Model:
