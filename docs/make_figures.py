@@ -2,7 +2,8 @@
 
     python docs/make_figures.py [OUTDIR]      (default: docs/figures)
 
-Writes, deterministically (fixed seeds):
+Writes, deterministically (fixed seeds, and PNG files without the matplotlib version in
+their metadata, so the same numbers give the same bytes; tests/test_make_figures.py):
 
 - ``ff-model-bode.png``: the identified FF model over the noisy and smoothed
   frequency-response estimates (the seed's figure 4.4, on a clean session);
@@ -35,6 +36,8 @@ __all__ = ["make_figures"]
 SESSION = {"path": "ff", "noise_duration": 8.0, "sweep_duration": 2.0, "sweep_silence": 0.2}
 OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
 DPI = 110
+# No "Software: Matplotlib version ..." entry: the bytes depend on the figures only.
+PNG_METADATA = {"Software": None}
 
 
 def make_figures(outdir: Path) -> list[Path]:
@@ -46,20 +49,20 @@ def make_figures(outdir: Path) -> list[Path]:
     result = identify(clean.noise, clean.sweeps, "ff", OPTIONS)
     figure = model_bode_figure(result.model, result.spectra, result.grid.chosen.gamma, seed_model=result.seed_model)
     written.append(outdir / "ff-model-bode.png")
-    figure.savefig(written[-1], dpi=DPI)
+    figure.savefig(written[-1], dpi=DPI, metadata=PNG_METADATA)
 
     delayed = simulate_session(SessionSpec(seed=2, **SESSION), effects=["delay:23"])
     lacking = appendix_a_model("ff")
     comparison = compare(lacking, delayed.sweeps)
     written.append(outdir / "ff-error-bands.png")
-    error_bands_figure(comparison).savefig(written[-1], dpi=DPI)
+    error_bands_figure(comparison).savefig(written[-1], dpi=DPI, metadata=PNG_METADATA)
 
     findings = diagnose(lacking, delayed.noise, delayed.sweeps, comparison=comparison)
     delay = next(f for f in findings if f["effect"] == "delay")
     context = DiagnosisContext(lacking, delayed.noise, delayed.sweeps, comparison)
     spectra = estimate_spectra(delayed.noise.trimmed(3.0))
     written.append(outdir / "ff-delay-evidence.png")
-    finding_figure(delay, context, spectra).savefig(written[-1], dpi=DPI)
+    finding_figure(delay, context, spectra).savefig(written[-1], dpi=DPI, metadata=PNG_METADATA)
     return written
 
 

@@ -68,6 +68,8 @@ def prepare(folder: Path, session: dict, model_file: Path) -> dict[str, str]:
     write_wav16(files["noise_ear"], u, 0.01 * np.random.default_rng(0).standard_normal(u.size), fs)
     files["silent_ear"] = folder / "sweep1_silent_ear.wav"
     write_wav16(files["silent_ear"], u, np.zeros_like(y), fs)
+    files["swapped"] = folder / "sweep1_swapped.wav"
+    write_wav16(files["swapped"], y, u, fs)
     return {key: str(path) for key, path in files.items()}
 
 
@@ -100,6 +102,9 @@ CASES = (
               "-o", "{folder}/m.json"), "--input-channel/--output-channel"),
     BadInput("a silent (disconnected) ear channel", ("identify", "--noise", "{noise}", "--sweep", "{silent_ear}",
                                                      "--sweep", "{sweep2}", "-o", "{folder}/m.json"), "silent"),
+    BadInput("the ear on channel 0 and the input on channel 1 (swapped)",
+             ("identify", "--noise", "{noise}", "--sweep", "{swapped}", "--sweep", "{sweep2}", "-o", "{folder}/m.json"),
+             "--input-channel 1 --output-channel 0"),
     BadInput("-o naming an input recording", ("identify", *_RECORDINGS, "-o", "{sweep2}", "--force"), "is an input"),
     BadInput("-o naming the model read", ("refine", "{model}", *_RECORDINGS, "--add", "delay:2", "-o", "{model}"),
              "is an input"),
@@ -109,6 +114,7 @@ CASES = (
              "does not exist"),
     BadInput("generate-firmware into a folder of the user's sources",
              ("generate-firmware", "{model}", "-o", "{user_firmware}"), "did not write"),
+    BadInput("demo into a folder of the user's files", ("demo", "{user_firmware}"), "did not write"),
     BadInput("an unknown effect", ("simulate", "{folder}/s", "--effect", "reverb:3"), "effect"),
     BadInput("an effect parameter that is not a number", ("simulate", "{folder}/s", "--effect", "delay:abc"),
              "delay"),

@@ -4,13 +4,15 @@ import pytest
 
 from helmet_anc.cli import main
 from bad_inputs import CASES, argv_of, prepare, snapshot
+from sysid.plants import appendix_a_model
 
 
 @pytest.fixture(scope="module")
-def bad_files(session_files, identifications, tmp_path_factory):
+def bad_files(session_files, tmp_path_factory):
+    # A stable model of the session's path is all a case needs: the true plant costs no identification.
     folder = tmp_path_factory.mktemp("bad_inputs")
     model_file = folder / "source_model.json"
-    identifications["ff"].model.save(model_file)
+    appendix_a_model("ff").save(model_file)
     files = prepare(folder / "inputs", session_files, model_file)
     return folder / "inputs", files
 
@@ -36,23 +38,6 @@ def test_a_delay_of_1e9_fails_fast(bad_files, capsys):
     main(["diagnose", files["delay"], "--noise", files["noise"], "--sweep", files["sweep1"], "--sweep", files["sweep2"]])
     capsys.readouterr()
     assert time.process_time() - started < 1.0
-
-
-@pytest.mark.parametrize("path", ["fb", "ff"])
-@pytest.mark.parametrize("plant", ["appendix-a", "random"])
-def test_the_ear_channel_checks_accept_real_sessions(path, plant, tmp_path):
-    """Quiet plants and FF sessions (two microphones) must pass the silent/uncorrelated ear checks."""
-    from sysid.random_plant import random_session
-    from sysid.recordings import load_recording
-    from sysid.simulate import SessionSpec, simulate_session, write_session
-
-    settings = dict(noise_duration=4.0, sweep_duration=1.0)
-    for seed in (0, 3):
-        session = (random_session(seed, path, **settings) if plant == "random"
-                   else simulate_session(SessionSpec(path=path, seed=seed, **settings)))
-        files = write_session(session, tmp_path / f"{seed}")
-        for key in ("noise", "sweep1", "sweep2"):
-            assert load_recording(files[key]).y.size > 0
 
 
 def test_a_recording_too_large_for_memory_is_refused_before_reading(tmp_path):

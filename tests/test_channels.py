@@ -67,6 +67,18 @@ def test_the_loaders_ear_checks_accept_the_same_sessions(written_session):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", ["fb", "ff"])
+@pytest.mark.parametrize("plant", ["appendix-a", "random"])
+@pytest.mark.parametrize("seed", [0, 3])
+def test_the_loaders_ear_checks_and_the_order_on_more_sessions(plant, path, seed, tmp_path):
+    session = _session(plant, path, seed)
+    files = write_session(session, tmp_path)
+    for key in ("noise", "sweep1", "sweep2"):
+        assert load_recording(files[key]).y.size > 0
+    _assert_order_told(session)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", ["fb", "ff"])
 def test_no_false_alarm_on_many_random_helmets(path):
     """Seeds 0-40: every session with enough coherent bands to judge (seed 30 FB has not) reads right."""
     for seed in range(41):

@@ -70,7 +70,7 @@ def _run_compare(document, session_files, folder, capsys):
         assert snapshot(folder) == before
 
 
-@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(document=model_documents())
 def test_compare_on_fuzzed_model_files(document, session_files, tmp_path, capsys):
     _run_compare(document, session_files, tmp_path, capsys)

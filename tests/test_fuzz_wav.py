@@ -72,9 +72,12 @@ def _run_compare(blob, session_files, model_file, folder, capsys):
 
 
 @pytest.fixture(scope="module")
-def model_file(identifications, tmp_path_factory):
+def model_file(tmp_path_factory):
+    # The session's true plant: a stable model without the cost of an identification.
+    from sysid.plants import appendix_a_model
+
     path = tmp_path_factory.mktemp("fuzz_wav") / "ff_model.json"
-    identifications["ff"].model.save(path)
+    appendix_a_model("ff").save(path)
     return path
 
 
