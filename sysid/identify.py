@@ -27,7 +27,7 @@ from .latency import LatencyEstimate, compensate_delay, estimate_latency
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, search_orders, sweep_rms
 from .output_error import block_data, refine_output_error
-from .recordings import Recording, check_same_rate
+from .recordings import Recording, RecordingFile, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
 from .uncertainty import frequency_response_band
@@ -87,9 +87,13 @@ def _check_inputs(noise: Recording, sweeps: list[Recording], options: Identifica
     check_repeats(*sweeps)
 
 
-def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
+def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: str = "fb",
              options: IdentificationOptions | None = None, progress=None) -> Identification:
-    """Identify a stable model of ``path`` from a noise recording and two sweeps."""
+    """Identify a stable model of ``path`` from a noise recording and two sweeps.
+
+    A noise recording opened with ``sysid.recordings.open_recording`` is read in blocks:
+    memory stays bounded whatever its length (the sweeps are held in memory).
+    """
     options = options or IdentificationOptions()
     if path not in PATHS:
         raise IdentificationError(f"path must be one of {', '.join(PATHS)}; found {path!r}")
@@ -105,9 +109,13 @@ def identify(noise: Recording, sweeps: list[Recording], path: str = "fb",
     if options.latency:
         latency = estimate_latency(estimate_spectra(body, "h1"), options.max_delay)
         delay = latency.samples
-        body = compensate_delay(body, delay)
+        body = body.advanced(delay) if isinstance(body, RecordingFile) else compensate_delay(body, delay)
     core_sweeps = [compensate_delay(s, delay) for s in sweeps]
     spectra = estimate_spectra(body, options.estimator)
+    if isinstance(body, RecordingFile):
+        # A noise recording read from its file in blocks gave its spectra above; what follows (output-error
+        # blocks, the band) uses its first refine_seconds only, so only those are held in memory.
+        body = body.head(max(options.refine_seconds, options.scan_seconds))
     sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
     seconds["spectra"] = time.perf_counter() - t0
 

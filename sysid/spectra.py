@@ -35,7 +35,7 @@ import numpy as np
 import scipy.signal
 
 from .errors import IdentificationError
-from .recordings import Recording
+from .recordings import Recording, RecordingFile
 
 __all__ = [
     "ESTIMATORS",
@@ -85,10 +85,16 @@ class FrequencyResponse:
     coherence: np.ndarray
 
 
-def estimate_spectra(noise: Recording, estimator: str = "h1", nperseg: int | None = None) -> Spectra:
-    """Input/output spectra of a noise recording (transient already removed) by ``estimator``."""
+def estimate_spectra(noise: Recording | RecordingFile, estimator: str = "h1", nperseg: int | None = None) -> Spectra:
+    """Input/output spectra of a noise recording (transient already removed) by ``estimator``.
+
+    A ``RecordingFile`` (read from disk in blocks) goes through ``streamed_spectra``,
+    which gives the same spectra to rounding in bounded memory.
+    """
     if estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator must be one of {', '.join(ESTIMATORS)}; found {estimator!r}")
+    if isinstance(noise, RecordingFile):
+        return streamed_spectra(noise.read, noise.length, noise.fs, nperseg, noise.path, estimator=estimator)
     nperseg = nperseg or segment_length(noise.fs)
     segments = noise.u.size // nperseg
     if segments < 1:
@@ -111,27 +117,32 @@ def estimate_spectra(noise: Recording, estimator: str = "h1", nperseg: int | Non
 
 
 def streamed_spectra(read, length: int, fs: float, nperseg: int | None = None, name: str = "<stream>",
-                     segments_per_block: int = 256) -> Spectra:
-    """The h1 spectra of ``estimate_spectra`` computed block by block, in bounded memory.
+                     segments_per_block: int = 256, estimator: str = "h1") -> Spectra:
+    """The spectra of ``estimate_spectra`` computed block by block, in bounded memory.
 
     ``read(start, stop)`` returns the (u, y) samples start..stop-1 (full-scale units) of a
     recording of ``length`` samples (transient already removed). Two passes: the channel
-    means, then the same Hann-windowed, 50 %-overlapping segments as ``scipy.signal.welch``
-    (starts 0, step = nperseg - nperseg // 2, no padding), ``segments_per_block`` at a
-    time, so memory is a few blocks of segments whatever the length; the result equals
-    ``estimate_spectra(recording, "h1")`` to rounding.
+    means, then the same segments as the in-memory estimator, ``segments_per_block`` at a
+    time, so memory is a few blocks of segments whatever the length. For h1 these are
+    the Hann-windowed, 50 %-overlapping segments of ``scipy.signal.welch`` (starts 0,
+    step = nperseg - nperseg // 2, no padding); for seed-average the non-overlapping
+    rectangular ones. The result equals ``estimate_spectra`` on the samples in memory to rounding.
     """
+    if estimator not in ESTIMATORS:
+        raise IdentificationError(f"estimator must be one of {', '.join(ESTIMATORS)}; found {estimator!r}")
     nperseg = nperseg or segment_length(fs)
     if length // nperseg < 1:
         raise IdentificationError(f"{name}: {length / fs:.3g} s after the transient is shorter than one "
                                   f"averaging segment of {nperseg / fs:.3g} s")
     step = nperseg - nperseg // 2
-    count = (length - nperseg) // step + 1
     sums = np.zeros(2)
     for start in range(0, length, step * segments_per_block):
         u, y = read(start, min(start + step * segments_per_block, length))
         sums += (np.sum(u), np.sum(y))
     mean_u, mean_y = sums / length
+    if estimator == "seed-average":
+        return _streamed_seed_average(read, length, fs, nperseg, mean_u, mean_y, segments_per_block)
+    count = (length - nperseg) // step + 1
     window = scipy.signal.get_window("hann", nperseg)
     s_uu = np.zeros(nperseg // 2 + 1)
     s_yy = np.zeros(nperseg // 2 + 1)
@@ -151,6 +162,22 @@ def streamed_spectra(read, length: int, fs: float, nperseg: int | None = None, n
     if nperseg % 2 == 0:
         scale[-1] /= 2
     return Spectra(fs, nperseg, s_uu * scale, s_yu * scale, s_yy * scale, "h1", 2 * (length // nperseg) - 1)
+
+
+def _streamed_seed_average(read, length: int, fs: float, nperseg: int, mean_u: float, mean_y: float,
+                           segments_per_block: int) -> Spectra:
+    """The seed's averaged segment DFTs (eqs. 3.2-3.3) of ``streamed_spectra``, block by block."""
+    segments = length // nperseg
+    U = np.zeros(nperseg // 2 + 1, dtype=complex)
+    Y = np.zeros(nperseg // 2 + 1, dtype=complex)
+    for first in range(0, segments, segments_per_block):
+        last = min(first + segments_per_block, segments)
+        u, y = read(first * nperseg, last * nperseg)
+        U += np.fft.rfft((u - mean_u).reshape(last - first, nperseg), axis=1).sum(axis=0)
+        Y += np.fft.rfft((y - mean_y).reshape(last - first, nperseg), axis=1).sum(axis=0)
+    U /= segments * nperseg
+    Y /= segments * nperseg
+    return Spectra(fs, nperseg, np.abs(U) ** 2, Y * np.conj(U), np.abs(Y) ** 2, "seed-average", segments)
 
 
 def response(spectra: Spectra, band: tuple[float, float]) -> FrequencyResponse:

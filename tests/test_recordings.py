@@ -1,13 +1,16 @@
 """Loading recordings: scaling of every PCM format and every bad input of the contract."""
 
+import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.io.wavfile
 
 from sysid.errors import RecordingError
-from sysid.recordings import RecordingWarning, check_same_rate, load_recording, recording_from_arrays, write_wav16
+from sysid.recordings import (RecordingWarning, check_same_rate, load_recording, open_recording, recording_from_arrays,
+                              write_wav16)
 
 
 def _stereo(rng, n=4410):
@@ -124,3 +127,120 @@ def test_slow_plant_response_is_not_a_dc_offset(sessions):
         shifted = recording_from_arrays(sweep.u, sweep.y + 0.01, sweep.fs, "fb_sweep")
     # The 2 s sweep is mostly the plant's slow tail, which biases the part means: detection, rough value.
     assert shifted.dc_offset[1] == pytest.approx(0.01, abs=4e-3)
+
+
+def _heard(rng, n):
+    """Stereo test signals whose ear channel follows the input (longer files are checked for that)."""
+    x = _stereo(rng, n)
+    return np.stack([x[:, 0], 0.6 * x[:, 0] + 0.2 * x[:, 1]], axis=1)
+
+
+def _write_pcm(path, frames: np.ndarray, bits: int, tag: int = 1, extensible: bool = False) -> None:
+    """A stereo PCM/float WAV written by hand (24-bit and WAVE_FORMAT_EXTENSIBLE, which scipy does not write)."""
+    import struct
+
+    width = bits // 8
+    if bits == 24:
+        codes = frames.astype("<i4").view(np.uint8).reshape(frames.shape + (4,))[..., :3]
+        data = codes.tobytes()
+    else:
+        data = frames.astype({(1, 16): "<i2", (1, 32): "<i4", (3, 32): "<f4", (1, 64): "<i8"}[(tag, bits)]).tobytes()
+    channels = frames.shape[1]
+    head = struct.pack("<HHIIHH", 0xFFFE if extensible else tag, channels, 44100, 44100 * width * channels,
+                       width * channels, bits)
+    if extensible:
+        head += struct.pack("<HHI", 22, bits, 3) + struct.pack("<H", tag) + b"\x00\x00\x00\x00\x10\x00\x80\x00\x00\xaa\x00\x38\x9b\x71"
+    body = b"WAVE" + b"fmt " + struct.pack("<I", len(head)) + head + b"data" + struct.pack("<I", len(data)) + data
+    Path(path).write_bytes(b"RIFF" + struct.pack("<I", len(body)) + body)
+
+
+class TestRecordingFile:
+    """open_recording reads blocks from the file; every view equals the same slice of the loaded recording."""
+
+    @pytest.mark.parametrize("bits, extensible", [(16, False), (24, False), (24, True), (32, False)])
+    def test_pcm_formats_scale_like_the_contract(self, tmp_path, rng, bits, extensible):
+        codes = np.round(_stereo(rng) * 2 ** (bits - 1)).astype(np.int64)
+        _write_pcm(tmp_path / "a.wav", codes, bits, extensible=extensible)
+        rec = load_recording(tmp_path / "a.wav")
+        np.testing.assert_array_equal(rec.u, codes[:, 0] / 2.0 ** (bits - 1))
+        np.testing.assert_array_equal(rec.y, codes[:, 1] / 2.0 ** (bits - 1))
+
+    @pytest.mark.parametrize("kind", ["int16", "int24", "float32"])
+    def test_windows_equal_slices_in_memory(self, tmp_path, rng, kind):
+        x = _heard(rng, 20000)
+        if kind == "int16":
+            write_wav16(tmp_path / "a.wav", x[:, 0], x[:, 1], 44100)
+        elif kind == "int24":
+            _write_pcm(tmp_path / "a.wav", np.round(x * 2**23).astype(np.int64), 24)
+        else:
+            scipy.io.wavfile.write(tmp_path / "a.wav", 44100, x.astype(np.float32))
+        whole = load_recording(tmp_path / "a.wav")
+        lazy = open_recording(tmp_path / "a.wav")
+        assert (lazy.length, lazy.fs, lazy.path) == (whole.u.size, whole.fs, whole.path)
+        view = lazy.trimmed(0.1).advanced(7)
+        first = 4410
+        u, y = view.read(100, 5100)
+        np.testing.assert_array_equal(u, whole.u[first + 100:first + 5100])
+        np.testing.assert_array_equal(y, whole.y[first + 107:first + 5107])
+        head = view.head(0.2)
+        np.testing.assert_array_equal(head.u, whole.u[first:first + 8820])
+        np.testing.assert_array_equal(head.y, whole.y[first + 7:first + 8827])
+        assert view.length == whole.u.size - first - 7
+        np.testing.assert_array_equal(lazy.load().y, whole.y)
+
+    def test_spectra_of_the_file_equal_those_in_memory_and_are_read_in_blocks(self, tmp_path, rng, monkeypatch):
+        from sysid import recordings
+        from sysid.spectra import estimate_spectra
+
+        x = _stereo(rng, 60000)
+        write_wav16(tmp_path / "a.wav", x[:, 0], 0.5 * x[:, 0] + 0.1 * x[:, 1], 44100)
+        lazy = open_recording(tmp_path / "a.wav").trimmed(0.1)
+        reads = []
+        real = recordings._read_frames
+        monkeypatch.setattr(recordings, "_read_frames", lambda *a: reads.append(a[3] - a[2]) or real(*a))
+        for estimator in ("h1", "seed-average"):
+            streamed = estimate_spectra(lazy, estimator, nperseg=500)
+            reference = estimate_spectra(load_recording(tmp_path / "a.wav").trimmed(0.1), estimator, nperseg=500)
+            np.testing.assert_allclose(streamed.s_yu, reference.s_yu, rtol=1e-9, atol=1e-12 * np.max(np.abs(reference.s_yu)))
+            assert streamed.segments == reference.segments
+        # 256 segments of 500 samples at 50 % overlap per read, never the whole file.
+        assert 0 < max(reads) <= 255 * 250 + 500
+
+    def test_quality_of_a_long_file_is_judged_block_by_block(self, tmp_path, rng, monkeypatch):
+        from sysid import recordings
+
+        x = _heard(rng, 40000)
+        y = x[:, 1].copy()
+        y[1000:1090:2] = 1.5  # 90 samples at both rails inside the first block only
+        y[1001:1090:2] = -1.5
+        write_wav16(tmp_path / "clip.wav", x[:, 0] + 0.05, y, 44100)
+        monkeypatch.setattr(recordings, "QUALITY_BLOCK", 10000)
+        with pytest.warns(RecordingWarning) as record:
+            lazy = open_recording(tmp_path / "clip.wav")
+        messages = sorted(str(w.message).split("clip.wav: ")[1] for w in record)
+        assert re.fullmatch(r"input channel has a DC offset of 0\.0(49|50)\d* FS", messages[0])
+        assert messages[1] == "output channel clipped on 0.225 % of samples"
+        assert lazy.clipped_fraction[1] == pytest.approx(90 / 40000)
+        assert lazy.dc_offset[0] == pytest.approx(0.05, abs=2e-3)
+
+    @pytest.mark.parametrize("bits, tag, message", [
+        (64, 1, r"unsupported sample format \(64-bit integer in 8-byte samples\)"),
+        (16, 2, r"not a readable WAV file \(format code 0x0002 is neither PCM nor IEEE float\)"),
+    ])
+    def test_unsupported_formats_are_one_line_errors(self, tmp_path, bits, tag, message):
+        _write_pcm(tmp_path / "odd.wav", np.ones((100, 2), np.int64), bits if tag == 1 else 16, tag=1)
+        if tag != 1:
+            blob = bytearray((tmp_path / "odd.wav").read_bytes())
+            blob[20:22] = tag.to_bytes(2, "little")
+            (tmp_path / "odd.wav").write_bytes(bytes(blob))
+        with pytest.raises(RecordingError, match="odd.wav: " + message):
+            open_recording(tmp_path / "odd.wav")
+
+    def test_a_file_cut_short_after_opening_is_a_one_line_error(self, tmp_path, rng):
+        x = _stereo(rng)
+        write_wav16(tmp_path / "a.wav", x[:, 0], x[:, 1], 44100)
+        lazy = open_recording(tmp_path / "a.wav")
+        with open(tmp_path / "a.wav", "r+b") as handle:
+            handle.truncate(1000)
+        with pytest.raises(RecordingError, match="a.wav: the file is shorter than when it was opened"):
+            lazy.read(0, lazy.length)

@@ -101,16 +101,19 @@ def test_recording_shorter_than_a_segment_is_rejected(rng):
 
 
 class TestStreamedSpectra:
+    @pytest.mark.parametrize("estimator", ["h1", "seed-average"])
     @pytest.mark.parametrize("length, nperseg", [(44100, 2205), (30011, 2000), (2205, 2205)])
-    def test_equals_in_memory_welch(self, length, nperseg):
+    def test_equals_in_memory_estimate(self, length, nperseg, estimator):
         from sysid.recordings import Recording
         from sysid.spectra import estimate_spectra, streamed_spectra
 
         rng = np.random.default_rng(length)
         u = rng.standard_normal(length) * 0.1 + 0.01
         y = np.convolve(u, [0.5, -0.2, 0.1])[:length] + 1e-3 * rng.standard_normal(length)
-        reference = estimate_spectra(Recording(u, y, 44100.0), "h1", nperseg)
-        streamed = streamed_spectra(lambda a, b: (u[a:b], y[a:b]), length, 44100.0, nperseg, segments_per_block=3)
+        reference = estimate_spectra(Recording(u, y, 44100.0), estimator, nperseg)
+        streamed = streamed_spectra(lambda a, b: (u[a:b], y[a:b]), length, 44100.0, nperseg, segments_per_block=3,
+                                    estimator=estimator)
+        assert streamed.estimator == estimator
         for name in ("s_uu", "s_yu", "s_yy"):
             np.testing.assert_allclose(getattr(streamed, name), getattr(reference, name), rtol=1e-9,
                                        atol=1e-12 * np.max(np.abs(getattr(reference, name))))

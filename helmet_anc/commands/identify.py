@@ -5,7 +5,7 @@ from __future__ import annotations
 from sysid.grid import parse_range, terminal_progress
 from sysid.identify import IdentificationOptions, identify
 from sysid.files import atomic_write_text
-from sysid.recordings import load_recording
+from sysid.recordings import open_recording
 from sysid.spectra import ESTIMATORS
 from .common import add_force_option, add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
 
@@ -36,7 +36,8 @@ def run(args) -> int:
     options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
                                     feedthrough=args.feedthrough)
-    noise = load_recording(args.noise, args.input_channel, args.output_channel)
+    # Read in blocks: a noise recording of any length is identified in bounded memory.
+    noise = open_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
     result = identify(noise, sweeps, args.path, options, progress=None if args.quiet else terminal_progress())
     result.model.save(output)
@@ -46,7 +47,8 @@ def run(args) -> int:
     if report_target:
         from sysid.report import write_report
 
-        report = write_report(report_target, result.model, noise, sweeps, identification=result)
+        # The report diagnoses the whole noise recording, in memory.
+        report = write_report(report_target, result.model, noise.load(), sweeps, identification=result)
         print(f"wrote {report}")
     print(identification_summary(result))
     print(f"wrote {output} and {table}" + (f" and {mat}" if mat else ""))
