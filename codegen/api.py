@@ -134,11 +134,12 @@ def _manifest_data(plan: Plan, name: str, variant: str, files: dict[str, str], v
     if plan.fixed is not None:
         data["formats"]["q15"] = {
             "input": "Q15 (int16)", "output": "Q15 (int16), rounded, saturated", "states": "Q31 (int32)",
-            "accumulator": "int64", "coefficients": "int32 with per-section exponents",
+            "accumulator": "int64, output in its high word", "form": "direct form I",
+            "coefficients": "int32: B = b 2^b_exponent, A = -a 2^a_exponent",
             "quantiser": plan.fixed.quantiser, "polynomial": plan.fixed.polynomial,
             "polynomial_exponent": plan.fixed.polynomial_exponent,
-            "sections": [{"order": s.order, "b": list(s.b), "c": list(s.c), "b_exponent": s.b_exponent,
-                          "c_exponent": s.c_exponent, "shift": s.shift, "b_align": s.b_align, "c_align": s.c_align}
+            "sections": [{"order": s.order, "b": list(s.b), "a": list(s.a), "guard": s.guard,
+                          "feedback_shift": s.feedback_shift, "b_exponent": s.b_exponent, "a_exponent": s.a_exponent}
                          for s in plan.fixed.sections]}
     if plan.floating is not None:
         data["formats"]["float"] = {

@@ -1,29 +1,30 @@
-"""Fixed-point (Q15 in/out, Q31 states and coefficients) design of a section cascade.
+"""Fixed-point (Q15 in/out, Q31 states, 32-bit coefficients) design of a section cascade.
 
 Signals between sections are Q31 (int32, 1.0 = 2^31) in full-scale units. Each
-section computes, with 64-bit accumulators and the "delta" feedback form
-(design reference: poles near z = 1 need more coefficient precision than the
-direct form's a1 ~ -2 leaves),
+section is a direct form I with a 64-bit accumulator whose high word is the output,
+shaped for the Cortex-M4's SMLAL (32 x 32 + 64 -> 64 in one instruction) and SSAT:
 
 .. math::
 
-    acc &= (\\sum_i B_i x_{n-i}) \\gg s_b + (C_1 y_{n-1} + C_2 y_{n-2}) \\gg s_c + e_{n-1} \\\\
-    w &= acc \\gg r, \\quad e_n = acc - w 2^r \\\\
-    y_n &= \\mathrm{sat}_{32}(w + 2 y_{n-1} - y_{n-2})
+    acc &= q_n + \\lfloor (A_1 y_{n-1} + A_2 y_{n-2}) / 2^d \\rfloor + \\sum_i B_i x_{n-i} \\\\
+    y_n &= \\mathrm{sat}_{32-g}(\\lfloor acc / 2^{32} \\rfloor)\\, 2^g, \\quad e_n = acc \\bmod 2^{32}
 
-for a two-pole section (``+ y_{n-1}`` for one pole, nothing for none), which is
-y = b.x - a1 y1 - a2 y2 with c1 = -a1 - 2, c2 = 1 - a2 (one pole: c1 = -a1 - 1).
-B_i = round(b_i 2^(31 + n_b)) and C_i = round(c_i 2^(31 + n_c)) each carry their own
-exponent so that small numerator gains and small delta coefficients keep about 30
-significant bits; r = 31 + min(n_b, n_c) and s_b, s_c align the two sums.
-``e`` is first-order error feedback (Higgins & Munson 1984; the floor error is
-fed back, which shapes the round-off by 1 - z^-1); with the ``round`` quantiser e
-is absent and w = (acc + 2^(r-1)) >> r.
+with B_i = round(b_i 2^(32-g)) and A_i = round(-a_i 2^(32-g+d)) (CMSIS-DSP's sign
+convention for the feedback), so acc / 2^32 = (b.x - a1 y1 - a2 y2) 2^-g. The output
+is kept on a grid of 2^g Q31 LSBs: sat_{32-g} clamps to [-2^(31-g), 2^(31-g) - 1],
+so y never leaves [-2^31, 2^31 - 2^g] (saturation, never wrap-around). ``q`` is the
+quantiser: first-order error feedback q_n = e_{n-1} (Higgins & Munson 1984: the
+floor residue fed back shapes the round-off by 1 - z^-1), or q = 2^31, rounding to
+nearest. On the board both the high word and the residue (the low word) are free.
 
-Overflow cannot happen inside a section: sum|B_i| and sum|C_i| are kept at most
-2^30 - 1, so each product sum is below 2^61 for any Q31 state (|x| <= 2^31) and
-acc below 2^62 + 2^55 < 2^63 (0 <= e < 2^r <= 2^55). Only the section output is
-saturated, never wrapped.
+``g`` (the guard exponent) is the smallest that keeps every coefficient in int32 and
+the accumulator in int64: with |x|, |y| <= 2^31, |acc| <= (sum|A| 2^-d + sum|B|) 2^31
++ 2^32 < 2^63 when the coefficient sums stay within :data:`COEFFICIENT_SUM_LIMIT`.
+A feedback polynomial near (1 - z^-1)^2 has |a1| + |a2| close to 3, so g is 2-3
+and the feedback coefficients keep 29-31 fractional bits (d = 0). When the numerator
+pushes g beyond 3 (a section with a big gain, e.g. a zero near z = 1 against a pole
+near z = 1), the feedback gets its own d extra fractional bits and its product sum is
+shifted down by d (one 64-bit shift) instead of losing them.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from .errors import PrecisionError
 from .sections import Cascade, Section
 
 __all__ = [
+    "COEFFICIENT_SUM_LIMIT",
     "QUANTISERS",
     "FixedDesign",
     "FixedSection",
@@ -45,13 +47,15 @@ __all__ = [
 ]
 
 QUANTISERS = ("efb", "round")
-# Bound on sum|coefficient| in integer units: product sums with Q31 states stay < 2^61.
-COEFFICIENT_SUM_LIMIT = 2**30 - 1
-EXPONENT_MIN, EXPONENT_MAX = -24, 24
+# Bound on sum|A| 2^-d + sum|B| in integer units: (2^32 - 4) 2^31 + 2^32 < 2^63.
+COEFFICIENT_SUM_LIMIT = 2**32 - 4
+INT32_LIMIT = 2**31 - 1
+GUARD_MAX = 30
+FEEDBACK_GUARD = 3
 
 
 def delta_coefficients(section: Section) -> tuple[float, float]:
-    """(c1, c2) of the delta feedback form: -a1 y1 - a2 y2 = base(y1, y2) + c1 y1 + c2 y2."""
+    """(c1, c2) of the delta feedback form: -a1 y1 - a2 y2 = base(y1, y2) + c1 y1 + c2 y2 (the float32 variant)."""
     a1, a2 = section.a[1], section.a[2]
     if section.order == 2:
         return -a1 - 2.0, 1.0 - a2
@@ -60,43 +64,41 @@ def delta_coefficients(section: Section) -> tuple[float, float]:
     return 0.0, 0.0
 
 
-def _exponent(values, what: str) -> int:
-    """Largest n in [EXPONENT_MIN, EXPONENT_MAX] with sum|round(v 2^(31+n))| within the limit."""
-    for n in range(EXPONENT_MAX, EXPONENT_MIN - 1, -1):
-        if sum(abs(round(v * 2.0 ** (31 + n))) for v in values) <= COEFFICIENT_SUM_LIMIT:
-            return n
-    raise PrecisionError(f"{what} coefficients too large for Q31 with shifts up to {-EXPONENT_MIN} bits")
+def _integers(values, exponent: int) -> tuple[int, ...]:
+    return tuple(round(v * 2.0**exponent) for v in values)
+
+
+def _fits(b, a, guard: int, d: int) -> bool:
+    big_b, big_a = _integers(b, 32 - guard), _integers(a, 32 - guard + d)
+    if max(abs(v) for v in (*big_b, *big_a)) > INT32_LIMIT:
+        return False
+    return sum(abs(v) for v in big_a) / 2.0**d + sum(abs(v) for v in big_b) <= COEFFICIENT_SUM_LIMIT
 
 
 @dataclass(frozen=True)
 class FixedSection:
-    """Integer coefficients and compile-time shifts of one section (see module docstring)."""
+    """Integer coefficients, guard exponent g and feedback shift d of one section (module docstring)."""
 
     order: int
     b: tuple[int, int, int]
-    c: tuple[int, int]
-    b_exponent: int
-    c_exponent: int
+    a: tuple[int, int]
+    guard: int
+    feedback_shift: int
 
     @property
-    def shift(self) -> int:
-        """r: right shift from the accumulator to Q31."""
-        return 31 + min(self.b_exponent, self.c_exponent)
+    def b_exponent(self) -> int:
+        """Fractional bits of B: B = b 2^b_exponent."""
+        return 32 - self.guard
 
     @property
-    def b_align(self) -> int:
-        return self.b_exponent - min(self.b_exponent, self.c_exponent)
-
-    @property
-    def c_align(self) -> int:
-        return self.c_exponent - min(self.b_exponent, self.c_exponent)
+    def a_exponent(self) -> int:
+        """Fractional bits of A: A = -a 2^a_exponent."""
+        return 32 - self.guard + self.feedback_shift
 
     def realised(self) -> Section:
         """The section these integers implement, as float64 b and a."""
-        b = tuple(v / 2.0 ** (31 + self.b_exponent) for v in self.b)
-        c1, c2 = (v / 2.0 ** (31 + self.c_exponent) for v in self.c)
-        base1, base2 = {2: (2.0, -1.0), 1: (1.0, 0.0), 0: (0.0, 0.0)}[self.order]
-        a = (1.0, -(c1 + base1), -(c2 + base2))
+        b = tuple(v / 2.0**self.b_exponent for v in self.b)
+        a = (1.0, *(-v / 2.0**self.a_exponent for v in self.a))
         return Section(b=b, a=a, poles=tuple(np.roots(a[: self.order + 1]).astype(complex)), zeros=())
 
 
@@ -128,17 +130,21 @@ def polynomial_exponent(coefficients) -> int:
 
 
 def _quantise_section(section: Section, prescale: float) -> FixedSection:
+    """Smallest guard g that fits (module docstring), then the most feedback bits d that still fit."""
     b = [v * prescale for v in section.b]
-    c = delta_coefficients(section)
-    nb = _exponent(b, "numerator")
-    nc = _exponent(c, "feedback") if any(c) else nb
-    return FixedSection(
-        order=section.order,
-        b=tuple(round(v * 2.0 ** (31 + nb)) for v in b),
-        c=tuple(round(v * 2.0 ** (31 + nc)) for v in c),
-        b_exponent=nb,
-        c_exponent=nc,
-    )
+    a = [-section.a[1], -section.a[2]]
+    for guard in range(0, GUARD_MAX + 1):
+        if _fits(b, a, guard, 0):
+            break
+    else:
+        raise PrecisionError(f"section coefficients too large for 32-bit integers with {GUARD_MAX} guard bits")
+    d = 0
+    # A stable feedback (|a1| < 2, |a2| < 1) fits with FEEDBACK_GUARD alone; only a numerator that
+    # pushes g beyond it takes bits from the feedback worth an extra shift to give back.
+    while guard > FEEDBACK_GUARD and section.order and d < 31 and _fits(b, a, guard, d + 1):
+        d += 1
+    return FixedSection(order=section.order, b=_integers(b, 32 - guard), a=_integers(a, 32 - guard + d),
+                        guard=guard, feedback_shift=d)
 
 
 def design_fixed(cascade: Cascade, delay: int, input_polynomial=None, quantiser: str = "efb") -> FixedDesign:

@@ -100,7 +100,9 @@ def predict_fixed(cascade: Cascade, design, fs: float) -> Prediction:
         realised[0] = Section(b=tuple(v / 2.0**design.polynomial_exponent for v in first.b), a=first.a,
                               poles=first.poles, zeros=first.zeros)
     shaping = design.quantiser == "efb"
-    roundoff = Q15_NOISE + sum(Q31_STEP**2 / 12 * _noise_gain(realised, k, w, shaping) for k in range(len(realised)))
+    # Section k's output lies on a grid of 2^g_k Q31 LSBs (codegen.fixedpoint).
+    roundoff = Q15_NOISE + sum((Q31_STEP * 2.0**section.guard) ** 2 / 12 * _noise_gain(realised, k, w, shaping)
+                               for k, section in enumerate(design.sections))
     return _assemble(cascade, realised, fs, roundoff)
 
 

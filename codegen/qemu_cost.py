@@ -30,6 +30,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .errors import BuildError
 
 __all__ = [
@@ -43,6 +45,7 @@ __all__ = [
     "firmware_folder",
     "have_m4_tools",
     "per_sample_cost",
+    "per_sample_function_cost",
 ]
 
 M4_ARCH = ("-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16")
@@ -103,34 +106,50 @@ def build_m4_elf(sources, workdir, *, include_dirs=(), cflags=M4_CFLAGS, name: s
     return elf
 
 
-def _symbol_address(elf: Path, symbol: str) -> int:
-    listing = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True, check=True).stdout
+def _symbols(elf: Path) -> dict[str, tuple[int, int]]:
+    """{name: (start, end)} of the ELF's function symbols (Thumb bit cleared)."""
+    listing = subprocess.run(["arm-none-eabi-nm", "-S", str(elf)], capture_output=True, text=True, check=True).stdout
+    table = {}
     for line in listing.splitlines():
         parts = line.split()
-        if len(parts) == 3 and parts[2] == symbol:
-            return int(parts[0], 16) & ~1  # Thumb function addresses carry bit 0
-    raise BuildError(f"{elf.name} has no symbol {symbol}")
+        if len(parts) == 4 and parts[2] in "tTwW":
+            start = int(parts[0], 16) & ~1  # Thumb function addresses carry bit 0
+            table[parts[3]] = (start, start + int(parts[1], 16))
+        elif len(parts) == 3 and parts[1] in "tTwW":
+            start = int(parts[0], 16) & ~1
+            table.setdefault(parts[2], (start, start + 2))
+    return table
 
 
 @dataclass(frozen=True)
 class RegionCounts:
-    """Instructions executed between successive ``cost_mark`` calls, and the program's exit status."""
+    """Instructions executed between successive ``cost_mark`` calls, and the program's exit status.
+
+    ``functions[i]`` maps each requested function name to the instructions executed
+    inside its body (its address range) during region i.
+    """
 
     regions: tuple[int, ...]
     exit_status: int
     total: int
+    functions: tuple[dict, ...] = ()
 
 
-def count_regions(elf, *, timeout: float = 600.0) -> RegionCounts:
+def count_regions(elf, *, functions=(), timeout: float = 600.0) -> RegionCounts:
     """Run ``elf`` on QEMU mps2-an386 and count the instructions of each marked region.
 
     Region i is everything executed from the i-th entry of ``cost_mark`` up to
-    (not including) the (i+1)-th. The trace goes to a temporary file that is
-    parsed and removed. Raises BuildError if QEMU is missing, times out or the
-    program exits with a non-zero status.
+    (not including) the (i+1)-th; for the names in ``functions`` the instructions
+    executed inside each of them are counted too. The trace goes to a temporary file
+    that is parsed and removed. Raises BuildError if a symbol is missing, QEMU times
+    out or the program exits with a non-zero status.
     """
     elf = Path(elf)
-    mark = _symbol_address(elf, MARK_FUNCTION)
+    table = _symbols(elf)
+    for symbol in (MARK_FUNCTION, *functions):
+        if symbol not in table:
+            raise BuildError(f"{elf.name} has no function {symbol}")
+    mark = table[MARK_FUNCTION][0]
     with tempfile.TemporaryDirectory(prefix="qemu_cost.") as tmp:
         log = Path(tmp) / "exec.log"
         command = ["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor", "none", "-serial", "none",
@@ -143,10 +162,16 @@ def count_regions(elf, *, timeout: float = 600.0) -> RegionCounts:
             raise BuildError(f"QEMU run of {elf.name} did not end within {timeout:g} s") from None
         if result.returncode != 0:
             raise BuildError(f"{elf.name} exited with status {result.returncode} on QEMU")
-        addresses = [int(pc, 16) for pc in _TRACE_PC.findall(log.read_bytes())]
-    entries = [index for index, pc in enumerate(addresses) if pc == mark]
-    regions = tuple(b - a for a, b in zip(entries, entries[1:]))
-    return RegionCounts(regions=regions, exit_status=result.returncode, total=len(addresses))
+        addresses = np.array([int(pc, 16) for pc in _TRACE_PC.findall(log.read_bytes())], dtype=np.int64)
+    entries = np.flatnonzero(addresses == mark)
+    regions = tuple(int(b - a) for a, b in zip(entries, entries[1:]))
+    per_function = []
+    for a, b in zip(entries, entries[1:]):
+        window = addresses[a:b]
+        per_function.append({name: int(np.count_nonzero((window >= table[name][0]) & (window < table[name][1])))
+                             for name in functions})
+    return RegionCounts(regions=regions, exit_status=result.returncode, total=int(addresses.size),
+                        functions=tuple(per_function))
 
 
 def per_sample_cost(counts: RegionCounts, short: int, long: int, first: int = 0) -> float:
@@ -160,3 +185,12 @@ def per_sample_cost(counts: RegionCounts, short: int, long: int, first: int = 0)
     if len(counts.regions) < first + 2:
         raise ValueError(f"need regions {first} and {first + 1}; the run marked {len(counts.regions)}")
     return (counts.regions[first + 1] - counts.regions[first]) / (long - short)
+
+
+def per_sample_function_cost(counts: RegionCounts, function: str, short: int, long: int, first: int = 0) -> float:
+    """As :func:`per_sample_cost`, for the instructions executed inside ``function`` only."""
+    if long <= short:
+        raise ValueError(f"long ({long}) must exceed short ({short})")
+    if len(counts.functions) < first + 2:
+        raise ValueError(f"need regions {first} and {first + 1}; the run marked {len(counts.functions)}")
+    return (counts.functions[first + 1][function] - counts.functions[first][function]) / (long - short)

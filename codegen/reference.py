@@ -1,15 +1,16 @@
 """Python references of the generated filters: bit-exact fixed point, float32, float64.
 
 :func:`fixed_reference` is the specification of the generated Q15 code: integer
-for integer the same operations (numpy int64 for the feed-forward sums, Python
-integers for the recursion), so the C output must agree to 0 LSB.
+for integer the same operations (Python integers, :func:`fixed_section` per section
+with its state returned so blocks can be chained), so the C output must agree to 0 LSB.
 :func:`float32_reference` performs the float32 operations of the generated float
 code in the same order. :func:`float64_reference` is the realised model in double
 precision, the yardstick of the signal-to-noise ratios.
 
 The cascade is processed section after section over the whole signal: each
 section's output depends only on its input sequence, so this equals the C code's
-sample-by-sample interleaving.
+order (the Q15 code runs section after section over blocks of up to
+``NAME_Q15_CHUNK`` samples, the float code sample after sample).
 """
 
 from __future__ import annotations
@@ -18,11 +19,11 @@ import numpy as np
 
 from sysid import lti
 
-from .fixedpoint import FixedDesign
+from .fixedpoint import FixedDesign, FixedSection
 from .float32 import FloatDesign
 from .realise import Realisation
 
-__all__ = ["delay_signal", "fixed_reference", "float32_reference", "float64_reference", "from_q15", "to_q15"]
+__all__ = ["FixedFilter", "delay_signal", "fixed_input", "fixed_reference", "fixed_section", "q31_to_q15_output", "float32_reference", "float64_reference", "from_q15", "to_q15"]
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
@@ -52,44 +53,85 @@ def _history(x: np.ndarray, lag: int) -> np.ndarray:
     return out
 
 
+def fixed_section(section: FixedSection, x: np.ndarray, quantiser: str, state=None) -> tuple[np.ndarray, tuple]:
+    """One section of the Q15 filter (:mod:`codegen.fixedpoint`) on Q31 input x (int64 array).
+
+    ``state`` is (x1, x2, y1, y2, e) from a previous call (None: from rest); returns the
+    Q31 output and the state after the last sample, so blocks can be chained.
+    """
+    x1, x2, y1, y2, e = state or (0, 0, 0, 0, 0)
+    b0, b1, b2 = section.b
+    a1, a2 = section.a
+    d, guard = section.feedback_shift, section.guard
+    top, bottom, unit = (1 << (31 - guard)) - 1, -(1 << (31 - guard)), 1 << guard
+    efb = quantiser == "efb"
+    y = np.empty(x.shape, np.int64)
+    for n, x0 in enumerate(x.tolist()):
+        acc = ((a1 * y1 + a2 * y2) >> d) + (e if efb else 1 << 31) + b0 * x0 + b1 * x1 + b2 * x2
+        if efb:
+            e = acc & 0xFFFFFFFF
+        high = acc >> 32
+        y0 = (top if high > top else max(high, bottom)) * unit
+        x2, x1, y2, y1 = x1, x0, y1, y0
+        y[n] = y0
+    return y, (x1, x2, y1, y2, e)
+
+
+def _polynomial_q31(design: FixedDesign, u: np.ndarray) -> np.ndarray:
+    """Q31 cascade input (int64) for delayed Q15 input u: u 2^16, or the input polynomial in Q31."""
+    if design.polynomial is None:
+        return u * 65536
+    # Horner in Q31 with floor shifts: acc = P_k + (acc u) >> 15, then x = (acc u) >> 15.
+    acc = np.full(u.shape, design.polynomial[-1], dtype=np.int64)
+    for p in design.polynomial[-2::-1]:
+        acc = p + ((acc * u) >> 15)
+    return (acc * u) >> 15
+
+
+def fixed_input(design: FixedDesign, u: np.ndarray) -> np.ndarray:
+    """Q31 cascade input (int64 array) of the Q15 filter for Q15 input u from rest: delay, then polynomial or u 2^16."""
+    return _polynomial_q31(design, delay_signal(np.asarray(u, dtype=np.int16).astype(np.int64), design.delay))
+
+
+def q31_to_q15_output(x: np.ndarray) -> np.ndarray:
+    """Q31 -> Q15 output word: round to nearest ((x + 2^15) >> 16), saturate."""
+    return np.clip((np.asarray(x, np.int64) + 32768) >> 16, -32768, 32767).astype(np.int16)
+
+
 def fixed_reference(design: FixedDesign, u: np.ndarray) -> np.ndarray:
     """Bit-exact output (int16) of the generated Q15 filter for Q15 input u, from rest."""
-    u = delay_signal(np.asarray(u, dtype=np.int16).astype(np.int64), design.delay)
-    if design.polynomial is None:
-        x = u * 65536
-    else:
-        # Horner in Q31 with floor shifts: acc = P_k + (acc u) >> 15, then x = (acc u) >> 15.
-        acc = np.full(u.shape, design.polynomial[-1], dtype=np.int64)
-        for p in design.polynomial[-2::-1]:
-            acc = p + ((acc * u) >> 15)
-        x = (acc * u) >> 15
+    x = fixed_input(design, u)
     for section in design.sections:
-        b0, b1, b2 = section.b
-        forward = (b0 * x + b1 * _history(x, 1) + b2 * _history(x, 2)) >> section.b_align
-        c1, c2 = section.c
-        shift, c_align, order = section.shift, section.c_align, section.order
-        efb = design.quantiser == "efb"
-        mask = (1 << shift) - 1
-        half = 1 << (shift - 1)
-        y = np.empty_like(x)
-        y1 = y2 = e = 0
-        for n, v in enumerate(forward.tolist()):
-            acc = v + ((c1 * y1 + c2 * y2) >> c_align)
-            if efb:
-                acc += e
-                e = acc & mask
-            else:
-                acc += half
-            w = acc >> shift
-            if order == 2:
-                w += 2 * y1 - y2
-            elif order == 1:
-                w += y1
-            out = INT32_MAX if w > INT32_MAX else max(w, INT32_MIN)
-            y2, y1 = y1, out
-            y[n] = out
-        x = y
-    return np.clip((x + 32768) >> 16, -32768, 32767).astype(np.int16)
+        x, _ = fixed_section(section, x, design.quantiser)
+    return q31_to_q15_output(x)
+
+
+class FixedFilter:
+    """The generated Q15 filter with its state carried between blocks, as the C's ``process()``.
+
+    For loops that need each output before the next input (closed-loop simulation):
+    ``process`` on blocks of any length, including 1, equals :func:`fixed_reference`
+    on the concatenated input.
+    """
+
+    def __init__(self, design: FixedDesign):
+        self.design = design
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to rest (the C's ``reset()``)."""
+        self._line = np.zeros(self.design.delay, np.int64)
+        self._states = [None] * len(self.design.sections)
+
+    def process(self, u) -> np.ndarray:
+        """Q15 samples (int16) in, Q15 samples out."""
+        u = np.asarray(u, dtype=np.int16).astype(np.int64).reshape(-1)
+        joined = np.concatenate((self._line, u))
+        delayed, self._line = joined[: u.size], joined[u.size:]
+        x = _polynomial_q31(self.design, delayed)
+        for k, section in enumerate(self.design.sections):
+            x, self._states[k] = fixed_section(section, x, self.design.quantiser, self._states[k])
+        return q31_to_q15_output(x)
 
 
 def float32_reference(design: FloatDesign, u: np.ndarray) -> np.ndarray:

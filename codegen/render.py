@@ -107,25 +107,43 @@ def int_literal(value: int, ctype: str = "INT64_C") -> str:
     return f"{ctype}({int(value)})"
 
 
+def _product(state: str, coefficient: int) -> str:
+    """A 32 x 32 -> 64-bit product the compiler maps to SMULL/SMLAL."""
+    return f"(int64_t){state} * {int_literal(coefficient, 'INT32_C')}"
+
+
+def _fixed_step(section, quantiser: str, x: tuple[str, str, str], y: tuple[str, str], out: str) -> dict:
+    """One sample of a section with the state variables in the given roles: x = (x[n], x[n-1],
+    x[n-2]), y = (y[n-1], y[n-2]); the output goes to ``out``."""
+    forward = [_product(state, b) for state, b in zip(x, section.b) if b]
+    feedback = [_product(state, a) for state, a in zip(y, section.a) if a]
+    if section.feedback_shift and feedback:
+        # The feedback's extra d fractional bits: its product sum is shifted down on its own.
+        return {"start": f"(({' + '.join(feedback)}) >> {section.feedback_shift}) + {quantiser}", "terms": forward,
+                "input": x[0], "out": out}
+    return {"start": quantiser, "terms": feedback + forward, "input": x[0], "out": out}
+
+
 def _fixed_sections(design: FixedDesign) -> list[dict]:
+    """Per section: the two unrolled steps and the single tail step of its sample loop, and the clamp.
+
+    The loop takes two samples per pass; the second reads its input into the variable of the
+    oldest input and each output replaces the older output, so the states change roles
+    instead of being copied (fixed in the template: x1 = x2, x2 = x0 after each pass).
+    """
     rows = []
+    quantiser = "(int64_t)e" if design.quantiser == "efb" else "INT64_C(2147483648)"
     for k, section in enumerate(design.sections):
-        terms = [f"{int_literal(b)} * h{k}_{lag}" if lag else f"{int_literal(b)} * v{k}"
-                 for lag, b in enumerate(section.b) if b]
-        feedback_terms = [f"{int_literal(c)} * h{k + 1}_{lag + 1}" for lag, c in enumerate(section.c) if c]
-        feedback = ""
-        if feedback_terms:
-            feedback = " + ".join(feedback_terms)
-            feedback = f"({feedback}) >> {section.c_align}" if section.c_align else f"({feedback})"
         rows.append({
             "index": k,
             "order": section.order,
-            "forward": " + ".join(terms) if terms else "0",
-            "b_align": section.b_align,
-            "feedback": feedback,
-            "shift": section.shift,
-            "mask": f"UINT64_C({(1 << section.shift) - 1})",
-            "half": int_literal(1 << (section.shift - 1)),
+            "guard": section.guard,
+            "feedback_shift": section.feedback_shift,
+            "pair": [_fixed_step(section, quantiser, ("x0", "x1", "x2"), ("y1", "y2"), "y2"),
+                     _fixed_step(section, quantiser, ("x2", "x0", "x1"), ("y2", "y1"), "y1")],
+            "tail": _fixed_step(section, quantiser, ("x0", "x1", "x2"), ("y1", "y2"), "y0"),
+            "bits": 32 - section.guard,
+            "unit": str(1 << section.guard),
         })
     return rows
 
@@ -189,8 +207,9 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
         "has_float": "float" in variants,
         "has_fixed": "q15" in variants,
         "efb": fixed is not None and fixed.quantiser == "efb",
-        "quantiser_text": ("first-order error feedback of the truncation residue"
-                           if fixed is not None and fixed.quantiser == "efb" else "rounding to nearest"),
+        "quantiser_text": ("the previous sample's residue e = acc mod 2^32 (first-order error feedback of the "
+                           "truncation residue)" if fixed is not None and fixed.quantiser == "efb"
+                           else "2^31 (rounding to nearest)"),
         "polynomial": bool(poly_fixed or poly_float),
         "fixed_poly": [int_literal(p) for p in poly_fixed],
         "fixed_poly_rest": [int_literal(p) for p in poly_fixed[-2::-1]],
@@ -198,6 +217,9 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
         "float_poly": [float_literal(a) for a in poly_float],
         "float_poly_rest": [float_literal(a) for a in poly_float[-2::-1]],
         "fixed_sections": _fixed_sections(fixed) if fixed is not None else [],
+        # One saturation helper per output width the sections use (SSAT takes the width as an immediate).
+        "saturations": [{"bits": bits, "top": str(2 ** (bits - 1) - 1)}
+                        for bits in sorted({32 - s.guard for s in fixed.sections if s.guard})] if fixed is not None else [],
         "float_sections": _float_sections(floating) if floating is not None else [],
     }
     if cmsis is not None:

@@ -42,9 +42,9 @@ class TestGenerateFirmware:
 
         assert fb_manifest.data["files"]["fb_filter.c"] == hashlib.sha256(source.encode()).hexdigest()
         for section in fb_manifest.data["formats"]["q15"]["sections"]:
-            for value in section["b"] + section["c"]:
+            for value in section["b"] + section["a"]:
                 if value:
-                    assert f"INT64_C({value})" in source
+                    assert f"INT32_C({value})" in source
         for section in fb_manifest.data["formats"]["float"]["sections"]:
             for value in section["c"]:
                 if value:
@@ -75,7 +75,7 @@ def test_verification_detects_a_changed_coefficient(tmp_path):
     header = (tmp_path / "ff" / "ff_filter.h").read_text()
     source = (tmp_path / "ff" / "ff_filter.c").read_text()
     value = manifest.data["formats"]["q15"]["sections"][1]["b"][0]
-    tampered = source.replace(f"INT64_C({value})", f"INT64_C({value + 1})", 1)
+    tampered = source.replace(f"INT32_C({value})", f"INT32_C({value + 1})", 1)
     assert tampered != source
     host = build_host("ff", header, tampered)
     with pytest.raises(VerificationError, match="differs from the bit-exact reference"):

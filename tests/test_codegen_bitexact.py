@@ -14,6 +14,7 @@ from codegen.api import generate_firmware
 from codegen.build import build_host
 from codegen.plan import plan_firmware
 from codegen.reference import (
+    FixedFilter,
     fixed_reference,
     float32_reference,
     float64_reference,
@@ -98,6 +99,23 @@ class TestAppendixModels:
         np.testing.assert_array_equal(c_out, fixed_reference(plan.fixed, q))
         exact = float64_reference(plan.realisation, from_q15(q))
         assert np.max(np.abs(from_q15(c_out) - exact)) < 1e-3
+
+
+def test_short_blocks_and_odd_tails(appendix_build):
+    """Blocks of 1, 2, 3 and 33 samples (pairs, odd tails, a chunk boundary) in C and in FixedFilter."""
+    model, plan, host = appendix_build
+    x = to_q15(model_sweeps(model, seconds=0.05)[0])
+    expected = fixed_reference(plan.fixed, x)
+    host.reset("q15")
+    stepper = FixedFilter(plan.fixed)
+    c_out, py_out, start, k = [], [], 0, 0
+    while start < x.size:
+        stop = min(x.size, start + (1, 2, 3, 33)[k % 4])
+        c_out.append(host.process_q15(x[start:stop]))
+        py_out.append(stepper.process(x[start:stop]))
+        start, k = stop, k + 1
+    assert np.array_equal(np.concatenate(c_out), expected)
+    assert np.array_equal(np.concatenate(py_out), expected)
 
 
 def test_delay_and_input_polynomial(tmp_path):

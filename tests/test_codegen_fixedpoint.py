@@ -5,7 +5,7 @@ import pytest
 from conftest_codegen import appendix_a_model, model_sweeps
 
 from codegen.errors import PrecisionError
-from codegen.fixedpoint import COEFFICIENT_SUM_LIMIT, design_fixed, polynomial_exponent
+from codegen.fixedpoint import COEFFICIENT_SUM_LIMIT, FEEDBACK_GUARD, _fits, design_fixed, polynomial_exponent
 from codegen.float32 import design_float32
 from codegen.noise import predict_fixed, predict_float32
 from codegen.plan import plan_firmware
@@ -24,10 +24,19 @@ class TestFixedDesign:
         _, c = cascade
         design = design_fixed(c, 0)
         for s in design.sections:
-            assert sum(abs(v) for v in s.b) <= COEFFICIENT_SUM_LIMIT
-            assert sum(abs(v) for v in s.c) <= COEFFICIENT_SUM_LIMIT
-            # Both product sums < 2^61 and the residue < 2^r: the int64 accumulator cannot overflow.
-            assert 2 * COEFFICIENT_SUM_LIMIT * 2**31 + 2**s.shift < 2**63
+            assert max(abs(v) for v in (*s.b, *s.a)) <= 2**31 - 1
+            # Feedback sum shifted down by d, plus the numerator sum, with states up to 2^31 and the
+            # residue below 2^32: the int64 accumulator cannot overflow.
+            bound = (sum(abs(v) for v in s.a) / 2**s.feedback_shift + sum(abs(v) for v in s.b)) * 2**31 + 2**32
+            assert bound < 2**63
+            assert sum(abs(v) for v in s.a) / 2**s.feedback_shift + sum(abs(v) for v in s.b) <= COEFFICIENT_SUM_LIMIT
+
+    def test_guard_is_the_smallest_that_fits(self, cascade):
+        _, c = cascade
+        for s, exact in zip(design_fixed(c, 0).sections, c.sections):
+            assert s.guard == 0 or not _fits(exact.b, (-exact.a[1], -exact.a[2]), s.guard - 1, 0)
+            # The feedback gets its own bits only where the numerator pushed the guard up.
+            assert s.feedback_shift == 0 or s.guard > FEEDBACK_GUARD
 
     def test_quantised_response_close(self, cascade):
         _, c = cascade

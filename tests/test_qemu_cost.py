@@ -6,7 +6,14 @@ Needs ``arm-none-eabi-gcc`` and ``qemu-system-arm``; skipped with the reason oth
 import pytest
 
 from codegen.errors import BuildError
-from codegen.qemu_cost import RegionCounts, build_m4_elf, count_regions, have_m4_tools, per_sample_cost
+from codegen.qemu_cost import (
+    RegionCounts,
+    build_m4_elf,
+    count_regions,
+    have_m4_tools,
+    per_sample_cost,
+    per_sample_function_cost,
+)
 
 missing = have_m4_tools()
 needs_m4 = pytest.mark.skipif(missing is not None, reason=f"needs {missing} (apt-get install gcc-arm-none-eabi "
@@ -37,8 +44,11 @@ int main(void)
 @needs_m4
 def test_known_loop_counts_three_instructions_per_iteration(tmp_path):
     (tmp_path / "loop.c").write_text(KNOWN_LOOP)
-    counts = count_regions(build_m4_elf([tmp_path / "loop.c"], tmp_path))
+    counts = count_regions(build_m4_elf([tmp_path / "loop.c"], tmp_path), functions=("spin",))
     assert len(counts.regions) == 3
+    # Inside spin: 3 per iteration and its return (bx lr); nothing in the empty region.
+    assert [f["spin"] for f in counts.functions] == [31, 331, 0]
+    assert per_sample_function_cost(counts, "spin", 10, 110) == 3.0
     # 100 more iterations of 3 instructions, everything else equal.
     assert counts.regions[1] - counts.regions[0] == 300
     assert per_sample_cost(counts, 10, 110) == 3.0
@@ -52,6 +62,14 @@ def test_failing_program_is_an_error(tmp_path):
     (tmp_path / "fail.c").write_text('#include "cost_mark.h"\nint main(void) { cost_mark(); return 3; }\n')
     with pytest.raises(BuildError, match="exited with status 3"):
         count_regions(build_m4_elf([tmp_path / "fail.c"], tmp_path))
+
+
+@needs_m4
+@needs_m4
+def test_unknown_function_is_an_error(tmp_path):
+    (tmp_path / "loop.c").write_text(KNOWN_LOOP)
+    with pytest.raises(BuildError, match="has no function missing_function"):
+        count_regions(build_m4_elf([tmp_path / "loop.c"], tmp_path), functions=("missing_function",))
 
 
 @needs_m4
