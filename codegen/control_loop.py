@@ -32,14 +32,48 @@ class FixedStepper:
 
     def __init__(self, design: FixedDesign):
         self.design = design
-        self.sections = [(s.order, s.b, s.c, s.b_align, s.c_align, s.shift, (1 << s.shift) - 1, 1 << (s.shift - 1))
-                         for s in design.sections]
         self.efb = design.quantiser == "efb"
+        self.steps = [self._section_step(s) for s in design.sections]
         self.reset()
 
+    def _section_step(self, section):
+        """f(v, x1, x2, y1, y2, e) -> (y, e) of one section, for the design's section form:
+        delta feedback with error feedback (``c``, ``b_align``, ``c_align``, ``shift``) or direct
+        form I with the output in the accumulator's high word (``a``, ``guard``, ``feedback_shift``)."""
+        order, efb = section.order, self.efb
+        if hasattr(section, "c"):
+            (b0, b1, b2), (c1, c2) = section.b, section.c
+            b_align, c_align, shift = section.b_align, section.c_align, section.shift
+            mask, half = (1 << shift) - 1, 1 << (shift - 1)
+
+            def step(v, x1, x2, y1, y2, e):
+                acc = (b0 * v + b1 * x1 + b2 * x2) >> b_align
+                acc += (c1 * y1 + c2 * y2) >> c_align
+                if efb:
+                    acc += e
+                    e = acc & mask
+                else:
+                    acc += half
+                w = acc >> shift
+                if order == 2:
+                    w += 2 * y1 - y2
+                elif order == 1:
+                    w += y1
+                return (_INT32_MAX if w > _INT32_MAX else (_INT32_MIN if w < _INT32_MIN else w)), e
+            return step
+        (b0, b1, b2), (a1, a2) = section.b, section.a
+        guard, d = section.guard, section.feedback_shift
+        low, high = -(1 << (31 - guard)), (1 << (31 - guard)) - 1
+
+        def step(v, x1, x2, y1, y2, e):
+            acc = (e if efb else 1 << 31) + ((a1 * y1 + a2 * y2) >> d) + b0 * v + b1 * x1 + b2 * x2
+            w = acc >> 32
+            return (high if w > high else (low if w < low else w)) << guard, acc & 0xFFFFFFFF
+        return step
+
     def reset(self) -> None:
-        self.h = [[0, 0] for _ in range(len(self.sections) + 1)]
-        self.e = [0] * len(self.sections)
+        self.h = [[0, 0] for _ in range(len(self.steps) + 1)]
+        self.e = [0] * len(self.steps)
         self.line = [0] * self.design.delay
         self.pos = 0
 
@@ -57,24 +91,13 @@ class FixedStepper:
             for a in design.polynomial[-2::-1]:
                 p = a + ((p * u) >> 15)
             v = (p * u) >> 15
-        h = self.h
-        for k, (order, b, c, b_align, c_align, shift, mask, half) in enumerate(self.sections):
+        h, e = self.h, self.e
+        for k, step in enumerate(self.steps):
             x1, x2 = h[k]
             y1, y2 = h[k + 1]
-            acc = (b[0] * v + b[1] * x1 + b[2] * x2) >> b_align
-            acc += (c[0] * y1 + c[1] * y2) >> c_align
-            if self.efb:
-                acc += self.e[k]
-                self.e[k] = acc & mask
-            else:
-                acc += half
-            w = acc >> shift
-            if order == 2:
-                w += 2 * y1 - y2
-            elif order == 1:
-                w += y1
+            w, e[k] = step(v, x1, x2, y1, y2, e[k])
             h[k] = [v, x1]
-            v = _INT32_MAX if w > _INT32_MAX else (_INT32_MIN if w < _INT32_MIN else w)
+            v = w
         h[-1] = [v, h[-1][0]]
         out = (v + 32768) >> 16
         return 32767 if out > 32767 else out
@@ -143,7 +166,7 @@ class Limits:
     """The limiter's parameters (``firmware/anc_control.h``, ANC_LIMIT_*), frames and LSB."""
 
     rail_samples: int = 64
-    window: int = 256
+    window: int = 1024
     growth_windows: int = 3
     floor: int = 64
 
@@ -151,7 +174,8 @@ class Limits:
 @dataclass
 class BoardRun:
     """What ``firmware/closed_loop.c`` writes: the ear words captured, the drive words played
-    (int16, one per frame) and the control path's status counters."""
+    (int16, one per frame) and the control path's status counters; and ``d_hat``, the
+    disturbance estimate of each captured frame (int16)."""
 
     ear: np.ndarray
     drive: np.ndarray
@@ -160,6 +184,7 @@ class BoardRun:
     muted_at: int
     frames: int
     model_saturations: int
+    d_hat: np.ndarray
 
 
 def _sat16(v: int) -> int:
@@ -196,15 +221,15 @@ class _Limiter:
         self.clear()
 
     def clear(self) -> None:
-        self.rail_run = self.fill = self.total = self.previous = self.growth_run = 0
+        self.rail_score = self.fill = self.total = self.previous = self.growth_run = 0
 
     def update(self, drive: int, d_hat: int) -> int:
         limits = self.limits
         if drive in (32767, -32768) or d_hat in (32767, -32768):
-            self.rail_run += 1
-        else:
-            self.rail_run = 0
-        if self.rail_run >= limits.rail_samples:
+            self.rail_score += 8
+        elif self.rail_score:
+            self.rail_score -= 1
+        if self.rail_score >= 8 * limits.rail_samples:
             return 1
         self.total += abs(d_hat)
         self.fill += 1
@@ -251,6 +276,7 @@ def board_loop(plan, plant: Model, d: np.ndarray, chin: np.ndarray, variant: str
     n = len(d)
     ear_out = np.zeros(n, np.int16)
     drive_out = np.zeros(n, np.int16)
+    d_hat_out = np.zeros(n, np.int16)
     ear_buf = [[0] * block, [0] * block]
     chin_buf = [[0] * block, [0] * block]
     drive_buf = [[0] * block, [0] * block]
@@ -305,6 +331,7 @@ def board_loop(plan, plant: Model, d: np.ndarray, chin: np.ndarray, variant: str
                 w_in.append(xv)
         q_out = q.process(q_in) if q is not None else [zero] * block
         w_out = w.process(w_in) if w is not None else [zero] * block
+        d_hat_out[k + 1 - block: k + 1] = d_hat
         tripped = False
         for i in range(block):
             total = _sat16(q_out[i] + w_out[i]) if fixed else _float_to_word(q_out[i] + w_out[i])
@@ -319,4 +346,4 @@ def board_loop(plan, plant: Model, d: np.ndarray, chin: np.ndarray, variant: str
                 if stepper is not None:
                     stepper.reset()
             d_line, x_line, line_pos = [zero] * extra, [zero] * extra, 0
-    return BoardRun(ear_out, drive_out, muted, trips, muted_at, frames, saturations)
+    return BoardRun(ear_out, drive_out, muted, trips, muted_at, frames, saturations, d_hat_out)

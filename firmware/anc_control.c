@@ -45,7 +45,7 @@ static int16_t anc_sat16(int32_t v)
 
 static void anc_clear_limiter(anc_control *ctl)
 {
-    ctl->rail_run = 0u;
+    ctl->rail_score = 0u;
     ctl->window_fill = 0u;
     ctl->window_sum = 0u;
     ctl->previous_sum = 0u;
@@ -103,14 +103,14 @@ static uint32_t anc_limit(anc_control *ctl, int16_t drive, int16_t d_hat)
 {
     uint32_t magnitude = (d_hat < 0) ? (uint32_t)(-(int32_t)d_hat) : (uint32_t)d_hat;
     if (drive == 32767 || drive == -32768 || d_hat == 32767 || d_hat == -32768) {
-        ctl->rail_run = ctl->rail_run + 1u;
-    } else {
-        ctl->rail_run = 0u;
+        ctl->rail_score = ctl->rail_score + 8u;
+    } else if (ctl->rail_score > 0u) {
+        ctl->rail_score = ctl->rail_score - 1u;
     }
-    if (ctl->rail_run >= ANC_LIMIT_RAIL_SAMPLES) {
+    if (ctl->rail_score >= 8u * ANC_LIMIT_RAIL_SAMPLES) {
         return ANC_MUTE_RAILS;
     }
-    /* At most ANC_LIMIT_WINDOW * 32768 = 2^23 for the default window: no overflow. */
+    /* At most ANC_LIMIT_WINDOW * 32768 = 2^25 for the default window: no overflow. */
     ctl->window_sum = ctl->window_sum + magnitude;
     ctl->window_fill = ctl->window_fill + 1u;
     if (ctl->window_fill == ANC_LIMIT_WINDOW) {

@@ -32,17 +32,21 @@
  * Safety limiter. The loop is declared unstable, the drive muted (zeros from the next
  * computed sample on, latched until anc_control_unmute) and the reason recorded in
  * `muted` (ANC_MUTE_RAILS, ANC_MUTE_GROWTH) with `trips` counted, when
- *   - the drive (before muting) or d_hat sits at a 16-bit rail for ANC_LIMIT_RAIL_SAMPLES
- *     consecutive frames, or
- *   - sum |d_hat| over a window of ANC_LIMIT_WINDOW frames exceeds twice that of the
- *     window before (6 dB growth) and ANC_LIMIT_FLOOR LSB per frame on average, for
+ *   - rails: a score that rises by 8 in every frame whose drive (before muting) or d_hat
+ *     sits at a 16-bit rail and falls by 1 (down to 0) in every other frame reaches
+ *     8 * ANC_LIMIT_RAIL_SAMPLES. Drive or d_hat held at a rail mute after exactly
+ *     ANC_LIMIT_RAIL_SAMPLES frames; an oscillation that touches a rail in a fraction p of
+ *     its frames (p > 1/9) mutes within 8 * ANC_LIMIT_RAIL_SAMPLES / (9 p - 1) frames;
+ *     occasional clipping of loud noise (p < 1/9) never mutes; or
+ *   - growth: sum |d_hat| over a window of ANC_LIMIT_WINDOW frames exceeds twice that of
+ *     the window before (6 dB growth) and ANC_LIMIT_FLOOR LSB per frame on average, for
  *     ANC_LIMIT_GROWTH_WINDOWS consecutive windows.
  * With a perfect model d_hat is the disturbance, which the control cannot change; it grows
  * by itself only when the loop is unstable (d_hat = d + (S - S_model) drive), or when the
- * noise itself rises 6 dB per window for that long (then the mute is a false alarm; the
- * application unmutes). Muting also clears Q and W so an unmute starts from rest.
- * The rail condition mutes at most ANC_LIMIT_RAIL_SAMPLES frames after the drive reaches
- * the rail; the zeros reach the DAC ANC_PROCESSING_LATENCY frames later.
+ * noise itself rises 6 dB per window for that long (18 dB in 70 ms at 44.1 kHz with the
+ * defaults: then the mute is a false alarm and the application unmutes). Muting also
+ * clears Q and W so an unmute starts from rest. The zeros reach the DAC
+ * ANC_PROCESSING_LATENCY frames after the trip.
  */
 #ifndef ANC_CONTROL_H
 #define ANC_CONTROL_H
@@ -78,7 +82,7 @@
 #define ANC_LIMIT_RAIL_SAMPLES 64u
 #endif
 #ifndef ANC_LIMIT_WINDOW
-#define ANC_LIMIT_WINDOW 256u
+#define ANC_LIMIT_WINDOW 1024u
 #endif
 #ifndef ANC_LIMIT_GROWTH_WINDOWS
 #define ANC_LIMIT_GROWTH_WINDOWS 3u
@@ -122,7 +126,7 @@ typedef struct {
     uint32_t line_pos;
     int16_t d_hat[ANC_CONTROL_BLOCK];     /* the last block's disturbance estimate */
     /* Limiter (see the header comment). */
-    uint32_t rail_run;
+    uint32_t rail_score;      /* see the limiter in the header comment */
     uint32_t window_fill;
     uint32_t window_sum;
     uint32_t previous_sum;

@@ -34,7 +34,10 @@ def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
     parser = _Parser(prog=prog, description="Generate C filter code (float32 and Q15) for the ANC board from a "
                                             "helmet-anc model, and verify it against the Python references.",
                      epilog=EXAMPLE.replace("generate-firmware", prog, 1))
-    parser.add_argument("model", help="model JSON file (format helmet-anc/model@1)")
+    parser.add_argument("model", nargs="?", help="model JSON file (format helmet-anc/model@1)")
+    parser.add_argument("--controller", metavar="JSON",
+                        help="instead of a model: a controller JSON (helmet-anc design) -> C of its internal model, "
+                             "Q and W for the board's control path (firmware/anc_control.h)")
     parser.add_argument("-o", "--output", required=True, metavar="DIR",
                         help="output folder: a new one, or one holding only a previous generate-firmware output")
     parser.add_argument("--force", action="store_true",
@@ -44,8 +47,9 @@ def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
     parser.add_argument("--fs", type=float, help="board sample rate in Hz (default: the model's, 44.1 kHz)")
     parser.add_argument("--target", choices=TARGETS, default="generic",
                         help="generic C, or coefficient tables for CMSIS-DSP's biquad functions")
-    parser.add_argument("--min-snr", type=float, default=80.0, metavar="DB",
-                        help="refuse a variant whose predicted SNR (full-scale output sine) is below this (default 80)")
+    parser.add_argument("--min-snr", type=float, default=None, metavar="DB",
+                        help="refuse a variant whose predicted SNR (full-scale output sine) is below this "
+                             "(default 80; 30 with --controller, whose filters are judged in the closed loop)")
     parser.add_argument("--allow-unstable", action="store_true", help="generate code even for an unstable model")
     parser.add_argument("--order", type=int, help="balanced truncation to this many states")
     parser.add_argument("--scaling", choices=("linf", "l1"), default="linf", help="section scaling norm (default linf)")
@@ -74,9 +78,15 @@ def _main(argv, prog: str) -> int:
     if args.sweep and not args.verify:
         print(f"{parser.prog}: error: --sweep is only used with --verify", file=sys.stderr)
         return 2
+    if (args.model is None) == (args.controller is None):
+        print(f"{parser.prog}: error: give a model JSON or --controller JSON (exactly one)", file=sys.stderr)
+        return 2
+    if args.controller is not None:
+        return _controller(parser, args)
     try:
         manifest = generate_firmware(args.model, args.output, name=args.name, variant=args.variant, fs=args.fs,
-                                     target=args.target, min_snr=args.min_snr, allow_unstable=args.allow_unstable,
+                                     target=args.target, min_snr=80.0 if args.min_snr is None else args.min_snr,
+                                     allow_unstable=args.allow_unstable,
                                      sweeps=args.sweep if args.verify else None, order=args.order,
                                      scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser,
                                      force=args.force, progress=None if args.quiet else terminal_progress())
@@ -90,6 +100,35 @@ def _main(argv, prog: str) -> int:
         return 2
     print(f"wrote {', '.join(str(p) for p in manifest.files)} and {manifest.outdir / 'manifest.json'}")
     print(format_verification_table(manifest))
+    return 0
+
+
+def _controller(parser, args) -> int:
+    """``--controller``: the control path's filters and their worst-case headroom table."""
+    from codegen.controller import format_headroom_table, generate_controller_firmware
+
+    unused = [flag for flag, value in (("--name", args.name), ("--fs", args.fs), ("--order", args.order),
+                                       ("--verify", args.verify), ("--allow-unstable", args.allow_unstable))
+              if value] + (["--target"] if args.target != "generic" else [])
+    if unused:
+        print(f"{parser.prog}: error: {', '.join(unused)} not used with --controller (the filters run at the "
+              "controller's rate under fixed names)", file=sys.stderr)
+        return 2
+    try:
+        manifest = generate_controller_firmware(args.controller, args.output, variant=args.variant,
+                                                min_snr=30.0 if args.min_snr is None else args.min_snr,
+                                                quantiser=args.quantiser, force=args.force,
+                                                progress=None if args.quiet else terminal_progress())
+    except KeyboardInterrupt:
+        print(f"{parser.prog}: interrupted; no partial output left", file=sys.stderr)
+        return 130
+    except (CodegenError, ValueError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"{parser.prog}: error: {message}", file=sys.stderr)
+        return 2
+    print(f"wrote {', '.join(str(p) for p in manifest.files)} and {manifest.outdir / 'manifest.json'}")
+    print(f"worst-case headroom (latency {manifest.data['controller']['latency_samples']} samples):")
+    print(format_headroom_table(manifest.data["headroom"]))
     return 0
 
 
