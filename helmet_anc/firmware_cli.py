@@ -47,7 +47,7 @@ def build_parser(prog: str = "generate-firmware") -> argparse.ArgumentParser:
     parser.add_argument("--fs", type=float, help="board sample rate in Hz (default: the model's, 44.1 kHz)")
     parser.add_argument("--target", choices=TARGETS, default="generic",
                         help="generic C, or coefficient tables for CMSIS-DSP's biquad functions")
-    parser.add_argument("--min-snr", type=float, default=None, metavar="DB",
+    parser.add_argument("--min-snr", type=float, default=80.0, metavar="DB",
                         help="refuse a variant whose predicted SNR (full-scale output sine) is below this "
                              "(default 80; 30 with --controller, whose filters are judged in the closed loop)")
     parser.add_argument("--allow-unstable", action="store_true", help="generate code even for an unstable model")
@@ -82,11 +82,10 @@ def _main(argv, prog: str) -> int:
         print(f"{parser.prog}: error: give a model JSON or --controller JSON (exactly one)", file=sys.stderr)
         return 2
     if args.controller is not None:
-        return _controller(parser, args)
+        return _controller(parser, args, argv)
     try:
         manifest = generate_firmware(args.model, args.output, name=args.name, variant=args.variant, fs=args.fs,
-                                     target=args.target, min_snr=80.0 if args.min_snr is None else args.min_snr,
-                                     allow_unstable=args.allow_unstable,
+                                     target=args.target, min_snr=args.min_snr, allow_unstable=args.allow_unstable,
                                      sweeps=args.sweep if args.verify else None, order=args.order,
                                      scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser,
                                      force=args.force, progress=None if args.quiet else terminal_progress())
@@ -103,9 +102,14 @@ def _main(argv, prog: str) -> int:
     return 0
 
 
-def _controller(parser, args) -> int:
+def _controller(parser, args, argv) -> int:
     """``--controller``: the control path's filters and their worst-case headroom table."""
     from codegen.controller import format_headroom_table, generate_controller_firmware
+
+    # --min-snr given on the command line applies; its model default (80) does not.
+    given = argparse.ArgumentParser(add_help=False)
+    given.add_argument("--min-snr", type=float)
+    min_snr = given.parse_known_args(argv)[0].min_snr
 
     unused = [flag for flag, value in (("--name", args.name), ("--fs", args.fs), ("--order", args.order),
                                        ("--verify", args.verify), ("--allow-unstable", args.allow_unstable))
@@ -116,7 +120,7 @@ def _controller(parser, args) -> int:
         return 2
     try:
         manifest = generate_controller_firmware(args.controller, args.output, variant=args.variant,
-                                                min_snr=30.0 if args.min_snr is None else args.min_snr,
+                                                min_snr=30.0 if min_snr is None else min_snr,
                                                 quantiser=args.quantiser, force=args.force,
                                                 progress=None if args.quiet else terminal_progress())
     except KeyboardInterrupt:
