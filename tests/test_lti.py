@@ -1,0 +1,58 @@
+"""State-space helpers (sysid.lti): balanced realisation and state equalisation."""
+
+import numpy as np
+import pytest
+
+from sysid import lti
+from sysid.random_plant import random_plant
+
+Z = np.exp(1j * np.linspace(0.001, np.pi - 0.001, 400))
+
+
+@pytest.mark.parametrize("seed", [0, 4, 7])
+def test_balanced_realisation_of_a_random_helmet(seed):
+    plant = random_plant(seed).model
+    A, B, C, D = lti.balanced_realisation(plant.A, plant.B, plant.C, plant.D)
+    before = lti.frequency_response(plant.A, plant.B, plant.C, plant.D, Z)
+    after = lti.frequency_response(A, B, C, D, Z)
+    assert np.max(np.abs(after - before)) < 1e-9 * np.max(np.abs(before))
+    # Both Gramians equal one diagonal matrix, the Hankel singular values, largest first.
+    wc, wo = lti.gramians(A, B, C)
+    sigma = lti.hankel_singular_values(plant.A, plant.B, plant.C)
+    np.testing.assert_allclose(np.diag(wc), sigma, rtol=1e-6, atol=1e-12 * sigma[0])
+    np.testing.assert_allclose(wc, wo, atol=1e-9 * sigma[0])
+    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * sigma[0]
+    # A is a contraction and |B_i|, |C_i| <= sqrt(sigma_i).
+    assert np.linalg.norm(A, 2) <= 1 + 1e-9
+    assert np.all(np.abs(B[:, 0]) <= np.sqrt(sigma) * (1 + 1e-6))
+    assert np.all(np.abs(C[0]) <= np.sqrt(sigma) * (1 + 1e-6))
+
+
+def test_nearly_coincident_poles_with_huge_residues_come_out_of_order_one():
+    # 1e6 / (z - 0.9) - 1e6 / (z - 0.900001) is about -1 / (z - 0.9)^2: a modal form with a
+    # unit output row holds it only with entries of 1e6 (output-error fits reach 1e12).
+    A = np.diag([0.9, 0.9 + 1e-6])
+    B = np.array([[1e6], [-1e6]])
+    C = np.ones((1, 2))
+    Ab, Bb, Cb, Db = lti.balanced_realisation(A, B, C, 0.0)
+    assert max(np.abs(Ab).max(), np.abs(Bb).max(), np.abs(Cb).max()) < 10.0
+    exact = -1.0 / (Z - 0.9) ** 2
+    assert np.max(np.abs(lti.frequency_response(Ab, Bb, Cb, Db, Z) - exact)) < 1e-4 * np.max(np.abs(exact))
+
+
+def test_equalise_states_keeps_the_blocks_and_the_response():
+    A = lti.real_block_diagonal(np.array([0.9 * np.exp(0.3j), 0.9 * np.exp(-0.3j), 0.5]))
+    B = np.array([[1e7], [3e6], [1e-3]])
+    C = lti.block_output_row(A)
+    Ae, Be, Ce, De = lti.equalise_states(A, B, C, 0.0)
+    np.testing.assert_allclose(Ae, A)
+    np.testing.assert_allclose(np.linalg.norm(Be[:2, 0]), np.linalg.norm(Ce[0, :2]))
+    np.testing.assert_allclose(abs(Be[2, 0]), abs(Ce[0, 2]))
+    np.testing.assert_allclose(lti.frequency_response(Ae, Be, Ce, De, Z), lti.frequency_response(A, B, C, 0.0, Z),
+                               rtol=1e-9)
+
+
+def test_unstable_system_is_only_equalised():
+    A = np.array([[1.2]])
+    Ab, Bb, Cb, _ = lti.balanced_realisation(A, [[100.0]], [[1.0]], 0.0)
+    assert Ab[0, 0] == 1.2 and Bb[0, 0] == pytest.approx(10.0) and Cb[0, 0] == pytest.approx(10.0)
