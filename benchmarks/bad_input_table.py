@@ -1,9 +1,9 @@
 """The "Bad input" table of BENCHMARKS.md: every case of tests/bad_inputs.py run as a real command.
 
 A short FF session is simulated and identified, the bad inputs are derived from it, and each
-case runs ``helmet-anc ...`` in a subprocess. For each: exit status, the one stderr line, the
-number of stderr lines, and the files touched (every file of the folder compared before/after).
-Prints a Markdown table.
+case runs ``python -m helmet_anc.cli ...`` (this tree's command line) in a subprocess. For
+each: exit status, the one stderr line, the number of stderr lines, and the files touched
+(every file of the folder compared before/after). Prints a Markdown table.
 
     python benchmarks/bad_input_table.py
 """
@@ -17,7 +17,9 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))
 
 from bad_inputs import CASES, argv_of, prepare, snapshot  # noqa: E402
 from sysid.identify import IdentificationOptions, identify  # noqa: E402
@@ -44,8 +46,9 @@ def main() -> int:
             argv = argv_of(case, inputs)
             before = snapshot(folder)
             started = time.perf_counter()
-            result = subprocess.run(["helmet-anc", *argv], capture_output=True, text=True,
-                                    env={**os.environ, "COLUMNS": "200"})
+            # This tree's command line (python -m), whatever helmet-anc is installed.
+            result = subprocess.run([sys.executable, "-m", "helmet_anc.cli", *argv], capture_output=True, text=True,
+                                    env={**os.environ, "COLUMNS": "200", "PYTHONPATH": str(ROOT)})
             seconds = time.perf_counter() - started
             lines = result.stderr.splitlines()
             message = (lines[-1] if lines else "").replace(str(folder) + "/", "").replace("|", "\\|")

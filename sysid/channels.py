@@ -26,6 +26,7 @@ Silent and unrelated ear channels are refused where recordings are read
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,16 +110,14 @@ def check_channel_order(u: np.ndarray, y: np.ndarray, fs: float, name: str, inpu
 
     ``name`` (the file) and the channel numbers go into the one-line message, with the fix.
     """
-    import warnings
-
     order = channel_order(u, y, fs)
     if order.swapped:
         raise RecordingError(
-            f"{name}: the ear channel ({output_channel}) leads the input channel ({input_channel}) by "
-            f"{-order.group_delay:.0f} samples, which no sound path does: the channels look swapped; "
+            f"{name}: channel {output_channel} (taken as the ear) leads channel {input_channel} (taken as the input) "
+            f"by {-order.group_delay:.0f} samples, which no sound path does: the channels look swapped; "
             f"give --input-channel {output_channel} --output-channel {input_channel}")
     if order.judged and not order.clear:
-        warnings.warn(f"{name}: the ear channel ({output_channel}) does not clearly lag the input channel "
-                      f"({input_channel}) (mean group delay {order.group_delay:.1f} samples); if the model is poor, "
-                      "check the order with --input-channel/--output-channel", ChannelOrderWarning, stacklevel=2)
+        warnings.warn(f"{name}: channel {output_channel} (taken as the ear) does not clearly lag channel "
+                      f"{input_channel} (taken as the input) (mean group delay {order.group_delay:.1f} samples); "
+                      "if the model is poor, check the order with --input-channel/--output-channel", ChannelOrderWarning, stacklevel=2)
     return order

@@ -109,8 +109,8 @@ def test_swapped_channels_error_names_the_file_and_the_fix():
     rng = np.random.default_rng(2)
     u = rng.standard_normal(44100)
     y = np.concatenate((np.zeros(20), u[:-20]))
-    with pytest.raises(RecordingError, match=r"^s.wav: the ear channel \(1\) leads the input channel \(0\) by 20 "
-                                             r"samples.*--input-channel 1 --output-channel 0$"):
+    with pytest.raises(RecordingError, match=r"^s.wav: channel 1 \(taken as the ear\) leads channel 0 \(taken as "
+                                             r"the input\) by 20 samples.*--input-channel 1 --output-channel 0$"):
         check_channel_order(y, u, 44100.0, "s.wav")
 
 
