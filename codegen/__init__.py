@@ -7,10 +7,13 @@ The pipeline (design reference, "Firmware generation"):
 ``fixedpoint``  Q15/Q31 design with per-section exponents; ``float32`` its float twin;
 ``cmsis``       tables and Python models of CMSIS-DSP's biquad kernels;
 ``noise``       predicted round-off noise, coefficient error and overflow margins;
+``targets``     the registry of kinds of generated code (generic Q15/float32, cmsis) and
+                what each needs: designs, references, templates, host runner, manifest;
 ``plan``        all of the above for one model, with the refusals;
 ``reference``   bit-exact fixed-point, float32 and float64 Python references;
 ``render``      jinja2 templates (``codegen.templates``) and atomic output directories;
 ``build``       cffi host builds cached by source hash; ``verify`` the C against the references;
+``qemu_cost``   instructions per sample of the real Cortex-M4 ELF, counted on QEMU;
 ``api`` the Python front end (``generate_firmware``); the command line is ``helmet_anc``.
 """
 

@@ -20,12 +20,10 @@ from sysid.files import OutputRefused, check_output_directory
 from sysid.model import Model
 
 from . import __version__, noise
-from .build import build_host
-from .cmsis import KERNEL_FUNCTIONS
 from .errors import CodegenError, OutputError
 from .plan import Plan, plan_firmware
 from .render import build_context, render_files, validate_name, write_directory
-from .verify import CmsisPackageFilter, verify_host
+from .verify import verify_host
 
 __all__ = ["MANIFEST_FORMAT", "Manifest", "format_verification_table", "generate_firmware", "load_sweeps"]
 
@@ -131,31 +129,7 @@ def _manifest_data(plan: Plan, name: str, variant: str, files: dict[str, str], v
         "verification": verification,
         "files": {filename: hashlib.sha256(text.encode("utf-8")).hexdigest() for filename, text in files.items()},
     }
-    if plan.fixed is not None:
-        data["formats"]["q15"] = {
-            "input": "Q15 (int16)", "output": "Q15 (int16), rounded, saturated", "states": "Q31 (int32)",
-            "accumulator": "int64, output in its high word", "form": "direct form I",
-            "coefficients": "int32: B = b 2^b_exponent, A = -a 2^a_exponent",
-            "quantiser": plan.fixed.quantiser, "polynomial": plan.fixed.polynomial,
-            "polynomial_exponent": plan.fixed.polynomial_exponent,
-            "sections": [{"order": s.order, "b": list(s.b), "a": list(s.a), "guard": s.guard,
-                          "feedback_shift": s.feedback_shift, "b_exponent": s.b_exponent, "a_exponent": s.a_exponent}
-                         for s in plan.fixed.sections]}
-    if plan.floating is not None:
-        data["formats"]["float"] = {
-            "input": "float32 full scale", "output": "float32 full scale", "polynomial": plan.floating.polynomial,
-            "sections": [{"order": s.order, "b": list(s.b), "c": list(s.c)} for s in plan.floating.sections]}
-    if plan.cmsis is not None:
-        data["formats"]["cmsis"] = {
-            "kernels": {"q15": KERNEL_FUNCTIONS[plan.cmsis.kernel], "float": "arm_biquad_cascade_df2T_f32"},
-            "kernel": plan.cmsis.kernel,
-            "kernel_predictions": {KERNEL_FUNCTIONS[k]: v.as_dict() for k, v in plan.kernel_predictions.items()},
-            "post_shift": plan.cmsis.post_shift,
-            "output_shift": plan.cmsis.output_shift,
-            "q31_coefficients": [list(r) for r in plan.cmsis.q31_coefficients],
-            "q15_post_shift": plan.cmsis.q15_post_shift,
-            "q15_coefficients": [list(r) for r in plan.cmsis.q15_coefficients],
-            "f32_coefficients": [list(r) for r in plan.cmsis.f32_coefficients]}
+    data["formats"].update(plan.spec.formats(plan))
     return data
 
 
@@ -195,18 +169,15 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
                          order=order, scaling=scaling, headroom_db=headroom_db, quantiser=quantiser,
                          model_file=model_file)
     context = build_context(name=name, provenance=plan.provenance, fs=plan.realisation.fs, cascade=plan.cascade,
-                            variants=tuple(plan.predictions), fixed=plan.fixed, floating=plan.floating, cmsis=plan.cmsis)
+                            variants=tuple(plan.predictions), fixed=plan.fixed, floating=plan.floating, cmsis=plan.cmsis,
+                            target=plan.target)
     stage("render")
     files = render_files(context, target)
     verification = None
     if sweeps:
         stage("verify")
         signals, labels = load_sweeps(sweeps, plan.realisation.fs)
-        if target == "cmsis":
-            host = CmsisPackageFilter(plan.cmsis)
-        else:
-            host = build_host(name, files[f"{name}_filter.h"], files[f"{name}_filter.c"])
-        verification = verify_host(plan, host, signals, labels)
+        verification = verify_host(plan, plan.spec.host(name, files, plan), signals, labels)
     data = _json_ready(_manifest_data(plan, name, variant, files, verification))
     manifest_text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False, default=float) + "\n"
     stage("write")
@@ -235,7 +206,7 @@ def format_verification_table(manifest: Manifest | dict) -> str:
             if variant not in row:
                 continue
             figures = row[variant]
-            if variant == "q15":
+            if "max_lsb_difference" in figures:
                 agreement = f"{figures['max_lsb_difference']} LSB"
             else:
                 agreement = "bit-exact" if figures["bit_exact"] else f"{figures['max_relative_difference']:.2g}"

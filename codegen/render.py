@@ -20,10 +20,10 @@ import numpy as np
 from sysid.files import OutputRefused, write_output_directory
 
 from . import __version__
-from .cmsis import KERNEL_FUNCTIONS
 from .errors import InvalidNameError, OutputError
 from .fixedpoint import FixedDesign
 from .float32 import FloatDesign
+from .targets import get_target
 
 __all__ = [
     "C_KEYWORDS",
@@ -169,11 +169,12 @@ def _dc_headroom_lsb(dc_gain: float) -> int:
 
 
 def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, fixed: FixedDesign | None,
-                  floating: FloatDesign | None, cmsis=None) -> dict:
+                  floating: FloatDesign | None, cmsis=None, target: str = "generic") -> dict:
     """The plain dictionary the templates render: names, literals, sizes, flags.
 
     ``variants`` lists the variants to emit ('q15', 'float'); ``fixed``/``floating``
-    carry the generic target's designs, ``cmsis`` the cmsis target's tables.
+    carry the generic target's designs, ``cmsis`` the cmsis target's tables; the
+    target (:mod:`codegen.targets`) adds the fields only its templates use.
     """
     validate_name(name)
     # Model text reaches the C only through comment_text (a whitelist).
@@ -222,17 +223,7 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
                         for bits in sorted({32 - s.guard for s in fixed.sections if s.guard})] if fixed is not None else [],
         "float_sections": _float_sections(floating) if floating is not None else [],
     }
-    if cmsis is not None:
-        context["kernel"] = cmsis.kernel
-        context["kernel_function"] = KERNEL_FUNCTIONS[cmsis.kernel]
-        context["q15_post_shift"] = cmsis.q15_post_shift
-        # The Q15 kernel's rows carry a zero after b0 (CMSIS-DSP's layout for its dual 16-bit MACs).
-        context["cmsis_q15"] = [[f"(q15_t){v}" for v in (row[0], 0, *row[1:])] for row in cmsis.q15_coefficients]
-        context["post_shift"] = cmsis.post_shift
-        context["output_shift"] = cmsis.output_shift
-        context["cmsis_q31"] = [[f"(q31_t){v}" if v != -(2**31) else "(q31_t)(-2147483647 - 1)" for v in row]
-                                for row in cmsis.q31_coefficients]
-        context["cmsis_f32"] = [[float_literal(v) for v in row] for row in cmsis.f32_coefficients]
+    context.update(get_target(target).context({"fixed": fixed, "floating": floating, "cmsis": cmsis}))
     return context
 
 
@@ -254,13 +245,13 @@ def _environment() -> jinja2.Environment:
 
 
 def render_files(context: dict, target: str = "generic") -> dict[str, str]:
-    """{file name: text} of NAME_filter.h and NAME_filter.c for the target."""
-    prefix = "cmsis_" if target == "cmsis" else ""
+    """{file name: text} of NAME_filter.h and NAME_filter.c for the target's templates."""
+    header, source = get_target(target).templates
     env = _environment()
     name = context["name"]
     return {
-        f"{name}_filter.h": env.get_template(f"{prefix}filter.h.j2").render(context),
-        f"{name}_filter.c": env.get_template(f"{prefix}filter.c.j2").render(context),
+        f"{name}_filter.h": env.get_template(header).render(context),
+        f"{name}_filter.c": env.get_template(source).render(context),
     }
 
 

@@ -13,23 +13,14 @@ from __future__ import annotations
 import numpy as np
 
 from .build import HostFilter
-from .cmsis import cmsis_q15_reference, df2t_f32_reference, q31_to_q15
+from .cmsis import q31_to_q15
 from .errors import VerificationError
 from .plan import Plan
-from .reference import (
-    fixed_reference,
-    float32_reference,
-    float64_reference,
-    from_q15,
-    to_q15,
-)
+from .reference import float64_reference
+from .targets import CMSIS_FLOAT_TOLERANCE, FLOAT_TOLERANCE
 
 __all__ = ["CMSIS_FLOAT_TOLERANCE", "FLOAT_TOLERANCE", "CmsisPackageFilter", "reference_outputs", "snr_db", "verify_host"]
 
-# Tolerance between the float C code and its float32 reference, relative to max(1, peak output).
-FLOAT_TOLERANCE = 1e-6
-# The cmsisdsp package's DF2T kernel orders its float operations differently (and may fuse them).
-CMSIS_FLOAT_TOLERANCE = 1e-4
 
 
 def snr_db(reference: np.ndarray, test: np.ndarray) -> float:
@@ -46,21 +37,39 @@ def _blocks(run, x: np.ndarray) -> np.ndarray:
 
 
 def reference_outputs(plan: Plan, u: np.ndarray) -> dict:
-    """Python references of every planned variant for the full-scale input u."""
+    """Python references of every planned variant for the full-scale input u.
+
+    Per variant key: ``<key>_input`` (the samples the C takes), ``<key>`` (the
+    reference output) and ``float64_<key>`` (the realised model on the same input).
+    """
     out = {}
-    q15 = to_q15(u)
-    if "q15" in plan.predictions:
-        out["q15_input"] = q15
-        out["q15"] = (cmsis_q15_reference(plan.cmsis, q15) if plan.target == "cmsis"
-                      else fixed_reference(plan.fixed, q15))
-        out["float64_q15"] = float64_reference(plan.realisation, from_q15(q15), plan.model.input_nonlinearity)
-    if "float" in plan.predictions:
-        xf = np.asarray(u, np.float32)
-        out["float_input"] = xf
-        out["float"] = (df2t_f32_reference(plan.cmsis, xf) if plan.target == "cmsis"
-                        else float32_reference(plan.floating, xf))
-        out["float64_float"] = float64_reference(plan.realisation, xf.astype(float), plan.model.input_nonlinearity)
+    for variant in plan.variants:
+        x = variant.to_input(u)
+        out[f"{variant.key}_input"] = x
+        out[variant.key] = variant.reference(plan.design(variant.key), x)
+        out[f"float64_{variant.key}"] = float64_reference(plan.realisation, np.asarray(variant.to_float(x), float),
+                                                          plan.model.input_nonlinearity)
     return out
+
+
+def _compare(variant, label: str, c_out: np.ndarray, reference: np.ndarray, exact: np.ndarray) -> dict:
+    """Figures of one variant's C output against its reference; raises on a mismatch."""
+    if variant.exact:
+        diff = np.abs(c_out.astype(np.int64) - reference.astype(np.int64))
+        figures = {"max_lsb_difference": int(diff.max(initial=0)), "mismatches": int(np.count_nonzero(diff)),
+                   "snr_vs_float64_db": snr_db(exact, variant.to_float(c_out))}
+        if diff.any():
+            raise VerificationError(f"{label}: {variant.key.upper()} C output differs from the bit-exact reference in "
+                                    f"{figures['mismatches']} samples (max {figures['max_lsb_difference']} LSB)")
+        return figures
+    scale = max(1.0, float(np.max(np.abs(reference), initial=0.0)))
+    diff = float(np.max(np.abs(c_out.astype(float) - reference.astype(float)), initial=0.0)) / scale
+    figures = {"max_relative_difference": diff, "bit_exact": bool(np.array_equal(c_out, reference)),
+               "snr_vs_float64_db": snr_db(exact, variant.to_float(c_out))}
+    if not diff <= variant.tolerance:
+        raise VerificationError(f"{label}: {variant.key} C output differs from the float32 reference by {diff:.3g} "
+                                f"(tolerance {variant.tolerance:g})")
+    return figures
 
 
 def verify_host(plan: Plan, host: HostFilter, sweeps: list[np.ndarray], names: list[str] | None = None) -> dict:
@@ -73,26 +82,10 @@ def verify_host(plan: Plan, host: HostFilter, sweeps: list[np.ndarray], names: l
     for label, u in zip(names, sweeps):
         refs = reference_outputs(plan, np.asarray(u, float))
         row = {"sweep": label, "samples": int(np.size(u))}
-        if "q15" in refs:
-            host.reset("q15")
-            c_out = _blocks(host.process_q15, refs["q15_input"])
-            diff = np.abs(c_out.astype(np.int64) - refs["q15"].astype(np.int64))
-            row["q15"] = {"max_lsb_difference": int(diff.max(initial=0)), "mismatches": int(np.count_nonzero(diff)),
-                          "snr_vs_float64_db": snr_db(refs["float64_q15"], from_q15(c_out))}
-            if diff.any():
-                raise VerificationError(f"{label}: Q15 C output differs from the bit-exact reference in "
-                                        f"{row['q15']['mismatches']} samples (max {row['q15']['max_lsb_difference']} LSB)")
-        if "float" in refs:
-            host.reset("f32")
-            c_out = _blocks(host.process_f32, refs["float_input"])
-            scale = max(1.0, float(np.max(np.abs(refs["float"]), initial=0.0)))
-            diff = float(np.max(np.abs(c_out.astype(float) - refs["float"].astype(float)), initial=0.0)) / scale
-            row["float"] = {"max_relative_difference": diff, "bit_exact": bool(np.array_equal(c_out, refs["float"])),
-                            "snr_vs_float64_db": snr_db(refs["float64_float"], c_out)}
-            tolerance = CMSIS_FLOAT_TOLERANCE if plan.target == "cmsis" else FLOAT_TOLERANCE
-            if not diff <= tolerance:
-                raise VerificationError(f"{label}: float C output differs from the float32 reference by {diff:.3g} "
-                                        f"(tolerance {tolerance:g})")
+        for variant in plan.variants:
+            host.reset(variant.kind)
+            c_out = _blocks(getattr(host, f"process_{variant.kind}"), refs[f"{variant.key}_input"])
+            row[variant.key] = _compare(variant, label, c_out, refs[variant.key], refs[f"float64_{variant.key}"])
         rows.append(row)
     return {"sweeps": rows, "passed": True}
 
