@@ -28,7 +28,13 @@ void df1_q31_plain(const df1_q31_state *s, const int32_t *src, int32_t *dst, uin
 {
     const int32_t *coeffs = s->coeffs;
     int32_t *state = s->state;
+#ifdef DF1_CONSTANT_POST_SHIFT
+    /* The best case for the comparison: postShift known to the compiler (the library reads it at run time). */
+    const uint32_t shift = 31u - DF1_CONSTANT_POST_SHIFT;
+    (void)s->post_shift;
+#else
     uint32_t shift = 31u - s->post_shift;
+#endif
     uint32_t stage;
     for (stage = 0; stage < s->stages; ++stage) {
         int32_t b0 = coeffs[0], b1 = coeffs[1], b2 = coeffs[2], a1 = coeffs[3], a2 = coeffs[4];
@@ -69,7 +75,13 @@ void df1_q31_unrolled(const df1_q31_state *s, const int32_t *src, int32_t *dst, 
 {
     const int32_t *coeffs = s->coeffs;
     int32_t *state = s->state;
+#ifdef DF1_CONSTANT_POST_SHIFT
+    /* The best case for the comparison: postShift known to the compiler (the library reads it at run time). */
+    const uint32_t shift = 31u - DF1_CONSTANT_POST_SHIFT;
+    (void)s->post_shift;
+#else
     uint32_t shift = 31u - s->post_shift;
+#endif
     uint32_t stage;
     for (stage = 0; stage < s->stages; ++stage) {
         int32_t b0 = coeffs[0], b1 = coeffs[1], b2 = coeffs[2], a1 = coeffs[3], a2 = coeffs[4];

@@ -125,22 +125,25 @@ def _fixed_step(section, quantiser: str, x: tuple[str, str, str], y: tuple[str, 
 
 
 def _fixed_sections(design: FixedDesign) -> list[dict]:
-    """Per section: the two unrolled steps and the single tail step of its sample loop, and the clamp.
+    """Per section: the four unrolled steps and the single step of its sample loop, and the clamp.
 
-    The loop takes two samples per pass; the second reads its input into the variable of the
-    oldest input and each output replaces the older output, so the states change roles
-    instead of being copied (fixed in the template: x1 = x2, x2 = x0 after each pass).
+    The loop takes four samples per pass (as CMSIS-DSP's DF1 kernels do); each new input is
+    read into the variable of the oldest input and each output replaces the older output, so
+    the states change roles instead of being copied (after four samples the outputs are back
+    in their roles and the inputs need x2 = x1, x1 = x0, fixed in the template).
     """
     rows = []
     quantiser = "(int64_t)e" if design.quantiser == "efb" else "INT64_C(2147483648)"
+    roles = [(("x0", "x1", "x2"), ("y1", "y2"), "y2"), (("x2", "x0", "x1"), ("y2", "y1"), "y1"),
+             (("x1", "x2", "x0"), ("y1", "y2"), "y2"), (("x0", "x1", "x2"), ("y2", "y1"), "y1")]
     for k, section in enumerate(design.sections):
         rows.append({
             "index": k,
             "order": section.order,
             "guard": section.guard,
             "feedback_shift": section.feedback_shift,
-            "pair": [_fixed_step(section, quantiser, ("x0", "x1", "x2"), ("y1", "y2"), "y2"),
-                     _fixed_step(section, quantiser, ("x2", "x0", "x1"), ("y2", "y1"), "y1")],
+            "quad": [{**_fixed_step(section, quantiser, x, y, out), "offset": offset}
+                     for offset, (x, y, out) in enumerate(roles)],
             "tail": _fixed_step(section, quantiser, ("x0", "x1", "x2"), ("y1", "y2"), "y0"),
             "bits": 32 - section.guard,
             "unit": str(1 << section.guard),
