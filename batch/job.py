@@ -47,7 +47,7 @@ class BatchResult:
 
 def run_batch(sessions, outdir, *, workers: int | None = None, scheduler=None, refine: bool = False,
               options: IdentificationOptions | None = None, retries: int = DEFAULT_RETRIES,
-              progress=None) -> BatchResult:
+              progress=None, force: bool = False) -> BatchResult:
     """Identify every session of ``sessions`` into ``outdir``; return the table and nominal models.
 
     ``sessions`` is a folder of session folders, a CSV manifest (see ``batch.manifest``)
@@ -55,11 +55,13 @@ def run_batch(sessions, outdir, *, workers: int | None = None, scheduler=None, r
     ``dask.distributed.Client``) sends the tasks to a Dask cluster; otherwise a local
     pool of ``workers`` processes (default: the cores) runs them. ``refine`` adds
     ``refine --auto`` after identification. ``progress(done, total, row)`` is called
-    after each session, resumed ones included.
+    after each session, resumed ones included. ``outdir`` must be new, empty or an
+    earlier batch's output holding nothing else (``outputs.prepare_outdir``); ``force``
+    writes beside files that are not ours (never removing them).
     """
     options = options or IdentificationOptions()
     entries: list[SessionEntry] = list(sessions) if isinstance(sessions, (list, tuple)) else read_sessions(sessions)
-    layout = prepare_outdir(outdir, [name for entry in entries for name in entry.files])
+    layout = prepare_outdir(outdir, [name for entry in entries for name in entry.files], force)
     write_json(layout.marker, {"format": BATCH_FORMAT, "refine": refine, "options": asdict(options),
                                "sessions": len(entries)})
     rows: dict[str, dict] = {}

@@ -85,7 +85,9 @@ def render_summary(rows: list[dict], nominals: dict, dpi: float = 80.0) -> str:
     failed = sum(r["status"] != "ok" for r in rows)
     body = [_group_html(key, group, nominals.get(key), dpi) for key, group in sorted(groups.items())]
     title = "helmet-anc batch summary"
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            # The generator tag is how a later batch (sysid.files.is_ours) knows the page is ours.
+            f'<meta name="generator" content="helmet-anc batch"><title>{title}</title>'
             f"<style>{_CSS}</style></head><body>\n<h1>{title}</h1>\n"
             f"<p>{len(rows)} session(s), {len(rows) - failed} identified, {failed} failed, "
             f"{len(groups)} helmet/path group(s).</p>\n" + "\n".join(body) + "\n</body></html>\n")

@@ -14,7 +14,7 @@ import csv
 import io
 import json
 
-from .outputs import OutputLayout, atomic_write_text
+from .outputs import TABLE_FORMAT, OutputLayout, atomic_write_text
 from .task import ROW_FIELDS
 
 __all__ = ["table_csv", "table_json", "write_table"]
@@ -39,8 +39,9 @@ def table_csv(rows: list[dict]) -> str:
 
 
 def table_json(rows: list[dict]) -> str:
-    """The rows as a JSON list of objects."""
-    return json.dumps([{name: row.get(name) for name in ROW_FIELDS} for row in rows], indent=1, allow_nan=False) + "\n"
+    """The rows as JSON: ``{"format": "helmet-anc/batch-table@1", "rows": [{column: value}, ...]}``."""
+    table = {"format": TABLE_FORMAT, "rows": [{name: row.get(name) for name in ROW_FIELDS} for row in rows]}
+    return json.dumps(table, indent=1, allow_nan=False) + "\n"
 
 
 def write_table(layout: OutputLayout, rows: list[dict]) -> None:

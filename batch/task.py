@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 from threadpoolctl import threadpool_limits
 
+from sysid.files import sha256_text
 from sysid.identify import IdentificationOptions, identify
 from sysid.recordings import RecordingWarning, load_recording
 from .manifest import SessionEntry
@@ -127,6 +128,8 @@ def run_session(task: SessionTask) -> dict:
             row.update(_identify(entry, task, row, start))
             # The model first, then its record (below): a record with status ok implies a complete model.
             row.pop("_model").save(layout.model(entry.name))
+            # The record keeps the model's digest: a later batch tells our model from one edited since.
+            model_digest = sha256_text(layout.model(entry.name).read_bytes())
     except Exception as exc:  # noqa: BLE001 - a task must report, not raise, whatever one session does
         message = str(exc).splitlines()[0] if str(exc) else ""
         row.update({name: None for name in ROW_FIELDS if name not in _IDENTITY}, input_hash=task.digest, resumed=False)
@@ -134,7 +137,10 @@ def run_session(task: SessionTask) -> dict:
     row.pop("_model", None)
     row["seconds_total"] = time.perf_counter() - start
     layout.result(entry.name).parent.mkdir(parents=True, exist_ok=True)
-    write_json(layout.result(entry.name), {"format": RESULT_FORMAT, "input_hash": task.digest, "row": row})
+    record = {"format": RESULT_FORMAT, "input_hash": task.digest, "row": row}
+    if row["status"] == "ok":
+        record["model_sha256"] = model_digest
+    write_json(layout.result(entry.name), record)
     return row
 
 

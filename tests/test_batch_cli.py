@@ -33,6 +33,16 @@ def test_bad_sessions_argument_is_usage_error_and_writes_nothing(tmp_path, capsy
     assert not out.exists()
 
 
+def test_folder_not_ours_is_usage_error_and_left_as_it_was(sessions, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert main(["batch", str(sessions), "-o", str(out), "--workers", "1", *FAST]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "was not written by helmet-anc batch" in err[0] and "--force" in err[0]
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+
+
 def test_workers_and_scheduler_together_refused(sessions, tmp_path, capsys):
     assert main(["batch", str(sessions), "-o", str(tmp_path / "o"), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
     assert "not both" in capsys.readouterr().err

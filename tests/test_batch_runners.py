@@ -14,8 +14,9 @@ import time
 import pytest
 
 from batch import run_batch, write_simulated_campaign
-from batch.outputs import OutputLayout
+from batch.outputs import TABLE_CSV_START, TABLE_FORMAT, OutputLayout
 from sysid.errors import HelmetAncError
+from sysid.files import OutputRefused, is_ours
 from tests.batch_sessions import BATCH_OPTIONS, SHORT_SESSION, data_columns
 
 distributed = pytest.importorskip("distributed")
@@ -53,7 +54,9 @@ class TestLocalPool:
             record = json.loads(layout.result(row["session"]).read_text())
             assert model["identification"]["batch"]["input_hash"] == row["input_hash"] == record["input_hash"]
         table = json.loads(layout.table_json.read_text())
-        assert [r["session"] for r in table] == [r["session"] for r in local_run.rows]
+        assert table["format"] == TABLE_FORMAT
+        assert [r["session"] for r in table["rows"]] == [r["session"] for r in local_run.rows]
+        assert layout.table_csv.read_text().startswith(TABLE_CSV_START)
         assert layout.table_csv.read_text().count("\n") == 1 + len(local_run.rows)
 
     def test_nominal_model_per_helmet_with_its_bound(self, local_run):
@@ -170,12 +173,55 @@ class TestResume:
         assert all(r["order"] <= 4 for r in result.rows if r["status"] == "ok")
 
 
+def _snapshot(folder) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
 class TestOutputFolder:
     def test_foreign_folder_refused_before_any_work(self, campaign, tmp_path):
         (tmp_path / "mine.txt").write_text("not a batch output")
         with pytest.raises(HelmetAncError, match="not empty and was not written by helmet-anc batch"):
             run_batch(campaign[0], tmp_path, workers=1, options=BATCH_OPTIONS)
         assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
+
+    def test_every_output_is_recognisably_ours(self, local_run):
+        layout = local_run.layout
+        assert is_ours(layout.summary) and is_ours(layout.table_json) and is_ours(layout.marker)
+        for sub in ("models", "results", "nominal"):
+            assert all(is_ours(p) for p in (layout.root / sub).iterdir())
+
+    @pytest.mark.parametrize("intruder", ["notes.txt", "models/H0_head9_fb.json", "results/extra.csv", "scratch"])
+    def test_earlier_output_holding_foreign_files_refused_before_any_work(self, local_run, campaign, tmp_path, intruder):
+        out = tmp_path / "out"
+        shutil.copytree(local_run.layout.root, out)
+        if intruder == "scratch":
+            (out / intruder).mkdir()
+        else:
+            (out / intruder).write_text('{"mine": true}' if intruder.endswith(".json") else "mine")
+        before = _snapshot(out)
+        with pytest.raises(OutputRefused, match=f"did not write or that were edited since \\({intruder}\\)"):
+            run_batch(campaign[0], out, workers=1, options=BATCH_OPTIONS)
+        assert _snapshot(out) == before
+
+    def test_model_edited_since_refused_and_force_writes_beside_it(self, local_run, campaign, tmp_path):
+        out = tmp_path / "out"
+        shutil.copytree(local_run.layout.root, out)
+        model = out / "models" / "H0_head1_fb.json"
+        model.write_text(model.read_text().replace('"path": "fb"', '"path": "fb", "note": "mine"'))
+        with pytest.raises(OutputRefused, match="models/H0_head1_fb.json"):
+            run_batch(campaign[0], out, workers=1, options=BATCH_OPTIONS)
+        (out / "notes.txt").write_text("mine")
+        forced = run_batch(campaign[0], out, workers=1, options=BATCH_OPTIONS, force=True)
+        assert forced.resumed == 4  # nothing to redo: the inputs did not change
+        assert (out / "notes.txt").read_text() == "mine" and '"note": "mine"' in model.read_text()
+
+    def test_interrupted_writes_do_not_block_a_resume(self, local_run, campaign, tmp_path):
+        # A worker killed inside an atomic write leaves its temporary file; the folder is still ours.
+        out = tmp_path / "out"
+        shutil.copytree(local_run.layout.root, out)
+        (out / "models" / ".H0_head0_fb.json.k2j4x1.partial").write_text("{")
+        (out / ".results.csv.9f3kq.partial").write_text("session,")
+        assert run_batch(campaign[0], out, workers=1, options=BATCH_OPTIONS).resumed == 4
 
 
 class TestRefine:

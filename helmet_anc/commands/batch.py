@@ -24,6 +24,9 @@ def register(commands) -> None:
                         help="run on this Dask distributed scheduler (tcp://host:8786); workers must see "
                              "the session files and OUTDIR under the same paths")
     parser.add_argument("--refine", action="store_true", help="diagnose and refine each model (refine --auto)")
+    parser.add_argument("--force", action="store_true",
+                        help="write into OUTDIR even when it holds files helmet-anc batch did not write "
+                             "(they are left as they are)")
     parser.add_argument("--gammas", default="10:1000:10", metavar="A:B:STEP", help="smoothing widths (default 10:1000:10)")
     parser.add_argument("--orders", default="1:20", metavar="A:B", help="model orders (default 1:20)")
     parser.set_defaults(handler=run)
@@ -50,7 +53,7 @@ def run(args) -> int:
     options = IdentificationOptions(gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False))
     result = run_batch(args.sessions, args.output, workers=args.workers, scheduler=args.scheduler,
-                       refine=args.refine, options=options, progress=_progress)
+                       refine=args.refine, options=options, progress=_progress, force=args.force)
     layout = result.layout
     print(f"{len(result.rows)} session(s): {len(result.rows) - result.failed} identified "
           f"({result.resumed} from an earlier run), {result.failed} failed")
