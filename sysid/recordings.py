@@ -37,8 +37,9 @@ import scipy.io.wavfile
 from .data_quality import clipped_samples, dc_offset
 from .errors import RecordingError
 
-__all__ = ["Recording", "RecordingFile", "RecordingWarning", "WavLayout", "open_recording", "load_recording",
-           "check_same_rate", "write_wav16", "write_wav16_blocks", "recording_from_arrays", "QUALITY_BLOCK"]
+__all__ = ["Recording", "RecordingFile", "RecordingWarning", "WavLayout", "read_layout", "open_recording",
+           "load_recording", "check_same_rate", "write_wav16", "write_wav16_blocks", "recording_from_arrays",
+           "QUALITY_BLOCK"]
 
 
 class RecordingWarning(UserWarning):
@@ -238,7 +239,12 @@ def _decode(frames: np.ndarray, layout: WavLayout, channel: int) -> np.ndarray:
         b = raw.astype(np.uint32)
         low, high = (b[:, 0], b[:, 2]) if layout.dtype.byteorder != ">" else (b[:, 2], b[:, 0])
         return ((high << 24) | (b[:, 1] << 16) | (low << 8)).view(np.int32)
-    return np.ascontiguousarray(raw).view(layout.dtype).reshape(-1).astype(layout.dtype.newbyteorder("="), copy=False)
+    if layout.block_align == layout.channels * width:
+        # Frames without padding: a strided view of the block, copied once by the scaling.
+        samples = frames.view(layout.dtype)[:, channel]
+    else:
+        samples = np.ascontiguousarray(raw).view(layout.dtype).reshape(-1)
+    return samples.astype(layout.dtype.newbyteorder("="), copy=False)
 
 
 def _full_scale(data: np.ndarray) -> np.ndarray:
@@ -352,6 +358,7 @@ def load_recording(path, input_channel: int = 0, output_channel: int = 1) -> Rec
 # the usual length are judged in one block.
 QUALITY_BLOCK = 2**21
 # Loading holds the samples as float64 (4x a 16-bit file): 2 GiB of WAV is 8 GiB of memory.
+# open_recording, which holds none, keeps the same limit so that both ways in accept the same files.
 MAX_RECORDING_BYTES = 2 * 2**30
 # An ear channel below half a 16-bit LSB (RMS) is digital silence: nothing is connected.
 SILENT_RMS = 2.0**-16
