@@ -121,6 +121,15 @@ def _symbols(elf: Path) -> dict[str, tuple[int, int]]:
     return table
 
 
+def _one_instruction_per_block() -> list[str]:
+    """QEMU's option for one guest instruction per translation block: ``-singlestep`` until 8.0,
+    ``-accel tcg,one-insn-per-tb=on`` from 8.1 (the old spelling was removed in 9.0)."""
+    text = subprocess.run(["qemu-system-arm", "--version"], capture_output=True, text=True, check=False).stdout
+    match = re.search(r"version (\d+)\.(\d+)", text)
+    version = (int(match.group(1)), int(match.group(2))) if match else (0, 0)
+    return ["-accel", "tcg,one-insn-per-tb=on"] if version >= (8, 1) else ["-singlestep"]
+
+
 @dataclass(frozen=True)
 class RegionCounts:
     """Instructions executed between successive ``cost_mark`` calls, and the program's exit status.
@@ -153,8 +162,8 @@ def count_regions(elf, *, functions=(), timeout: float = 600.0) -> RegionCounts:
     with tempfile.TemporaryDirectory(prefix="qemu_cost.") as tmp:
         log = Path(tmp) / "exec.log"
         command = ["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor", "none", "-serial", "none",
-                   "-semihosting-config", "enable=on,target=native", "-singlestep", "-d", "exec,nochain",
-                   "-D", str(log), "-kernel", str(elf)]
+                   "-semihosting-config", "enable=on,target=native", *_one_instruction_per_block(), "-d",
+                   "exec,nochain", "-D", str(log), "-kernel", str(elf)]
         try:
             result = subprocess.run(command, cwd=elf.parent, capture_output=True, check=False, timeout=timeout,
                                     env={**os.environ, "LC_ALL": "C"})

@@ -221,7 +221,7 @@ def build_context(*, name: str, provenance: dict, fs: float, cascade, variants, 
         "float_poly": [float_literal(a) for a in poly_float],
         "float_poly_rest": [float_literal(a) for a in poly_float[-2::-1]],
         "fixed_sections": _fixed_sections(fixed) if fixed is not None else [],
-        # One saturation helper per output width the sections use (SSAT takes the width as an immediate).
+        # One saturation function per output width the sections use (SSAT takes the width as an immediate).
         "saturations": [{"bits": bits, "top": str(2 ** (bits - 1) - 1)}
                         for bits in sorted({32 - s.guard for s in fixed.sections if s.guard})] if fixed is not None else [],
         "float_sections": _float_sections(floating) if floating is not None else [],
