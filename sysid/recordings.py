@@ -70,6 +70,10 @@ class Recording:
         """Samples start..stop-1 of (u, y), as ``RecordingFile.read``."""
         return self.u[start:stop], self.y[start:stop]
 
+    def blocks(self, size: int):
+        """(u, y) blocks of ``size`` samples (the last one shorter), as ``RecordingFile.blocks``."""
+        return _blocks(self, size)
+
     def trimmed(self, start_s: float) -> "Recording":
         """The recording without its first start_s seconds (e.g. the 3 s noise transient)."""
         first = int(round(start_s * self.fs))
@@ -127,6 +131,10 @@ class RecordingFile:
         y = _full_scale(_decode(frames[self.lag:self.lag + n], self.layout, self.output_channel))
         return u, y
 
+    def blocks(self, size: int):
+        """(u, y) blocks of ``size`` samples (the last one shorter), each read when the iteration reaches it."""
+        return _blocks(self, size)
+
     def trimmed(self, start_s: float) -> "RecordingFile":
         """The recording without its first start_s seconds (as ``Recording.trimmed``)."""
         skip = min(int(round(start_s * self.fs)), self.length)
@@ -148,6 +156,11 @@ class RecordingFile:
     def load(self) -> Recording:
         """All samples in memory (8 bytes per sample and channel), as a Recording."""
         return self.head(None)
+
+
+def _blocks(recording: Recording | RecordingFile, size: int):
+    for start in range(0, recording.length, int(size)):
+        yield recording.read(start, start + int(size))
 
 
 _PCM, _IEEE_FLOAT, _EXTENSIBLE = 0x0001, 0x0003, 0xFFFE
@@ -341,8 +354,7 @@ def open_recording(path, input_channel: int = 0, output_channel: int = 1) -> Rec
     if input_channel == output_channel:
         raise RecordingError(f"{name}: input and output channel are both {input_channel}")
     recording = RecordingFile(name, layout.fs, layout.frames, layout, input_channel, output_channel)
-    blocks = (recording.read(start, start + QUALITY_BLOCK) for start in range(0, recording.length, QUALITY_BLOCK))
-    scan = _scan(name, blocks, _rails(layout))
+    scan = _scan(name, recording.blocks(QUALITY_BLOCK), _rails(layout))
     _check_ear_channel(recording, scan)
     _warn_quality(name, scan)
     return replace(recording, clipped_fraction=scan.clipped, dc_offset=scan.offsets)

@@ -187,6 +187,9 @@ class TestRecordingFile:
         np.testing.assert_array_equal(head.y, whole.y[first + 7:first + 8827])
         assert view.length == whole.u.size - first - 7
         np.testing.assert_array_equal(lazy.load().y, whole.y)
+        blocks = list(view.blocks(4000))
+        assert [b[0].size for b in blocks] == [4000] * 3 + [view.length - 12000]
+        np.testing.assert_array_equal(np.concatenate([b[1] for b in blocks]), whole.y[first + 7:])
 
     def test_spectra_of_the_file_equal_those_in_memory_and_are_read_in_blocks(self, tmp_path, rng, monkeypatch):
         from sysid import recordings
