@@ -13,6 +13,17 @@ hundred hertz, n = 32 functions resolve the 20 Hz - 2 kHz range that an FIR of t
 length (resolution fs / n, over 1 kHz) cannot. Every filter of the family is stable (all
 poles at a) and linear in c, so a frequency-weighted quadratic criterion has a closed-form
 minimum (``fit``).
+
+Optionally (``highpass_hz``) every function is multiplied by a fixed second-order high-pass
+with a double zero at DC,
+
+.. math::
+    H(z) = \\left( \\frac{1 + b}{2} \\, \\frac{1 - z^{-1}}{1 - b z^{-1}} \\right)^2,
+    \\qquad b = e^{-2 \\pi f_h / f_s},
+
+(unit gain at fs / 2) so the filter has no gain at DC whatever its coefficients: the
+feedback filter needs that below the identified band, where the model is an extrapolation
+and the true path may be large (the seed's FB path has a pole at 0.9999).
 """
 
 from __future__ import annotations
@@ -20,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.signal
 
 __all__ = ["LaguerreBasis", "fit"]
 
@@ -30,11 +42,20 @@ class LaguerreBasis:
 
     pole: float
     order: int
+    highpass_pole: float | None = None
 
     @classmethod
-    def at(cls, corner_hz: float, order: int, fs: float) -> "LaguerreBasis":
-        """Basis whose pole sits at corner_hz: a = exp(-2 pi corner_hz / fs)."""
-        return cls(float(np.exp(-2.0 * np.pi * corner_hz / fs)), int(order))
+    def at(cls, corner_hz: float, order: int, fs: float, highpass_hz: float | None = None) -> "LaguerreBasis":
+        """Basis whose pole sits at corner_hz: a = exp(-2 pi corner_hz / fs); with highpass_hz, the
+        DC-blocking factor H (module docstring) with b = exp(-2 pi highpass_hz / fs)."""
+        b = None if highpass_hz is None else float(np.exp(-2.0 * np.pi * highpass_hz / fs))
+        return cls(float(np.exp(-2.0 * np.pi * corner_hz / fs)), int(order), b)
+
+    def _highpass(self) -> tuple[np.ndarray, np.ndarray]:
+        """(numerator, denominator) in z^-1 of the DC-blocking factor H."""
+        b = self.highpass_pole
+        g = ((1.0 + b) / 2.0) ** 2
+        return g * np.array([1.0, -2.0, 1.0]), np.array([1.0, -2.0 * b, b * b])
 
     @property
     def size(self) -> int:
@@ -48,7 +69,12 @@ class LaguerreBasis:
         first = np.sqrt(1.0 - a * a) / (z - a)
         allpass = (1.0 - a * z) / (z - a)
         powers = allpass[:, None] ** np.arange(self.order)[None, :]
-        return np.hstack([np.ones((z.size, 1)), first[:, None] * powers])
+        result = np.hstack([np.ones((z.size, 1)), first[:, None] * powers])
+        if self.highpass_pole is not None:
+            num, den = self._highpass()
+            zi = 1.0 / z
+            result = result * (np.polyval(num[::-1], zi) / np.polyval(den[::-1], zi))[:, None]
+        return result
 
     def statespace(self, coefficients) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(A, B, C, D) of c_0 + sum c_i L_i; state i is L_i applied to the input.
@@ -69,7 +95,14 @@ class LaguerreBasis:
             A[i, i - 1] += 1.0
             A[i, i] += a
             B[i, 0] = -a * B[i - 1, 0]
-        return A, B, c[1:].reshape(1, -1), c[:1].reshape(1, 1)
+        C, D = c[1:].reshape(1, -1), c[:1].reshape(1, 1)
+        if self.highpass_pole is None:
+            return A, B, C, D
+        # Series: the Laguerre sum, then H (state [x_laguerre; x_h]).
+        Ah, Bh, Ch, Dh = scipy.signal.tf2ss(*self._highpass())
+        top = np.hstack([A, np.zeros((n, 2))])
+        bottom = np.hstack([Bh @ C, Ah])
+        return (np.vstack([top, bottom]), np.vstack([B, Bh @ D]), np.hstack([Dh @ C, Ch]), Dh @ D)
 
 
 def fit(responses: np.ndarray, gain: np.ndarray, target: np.ndarray, weight: np.ndarray,

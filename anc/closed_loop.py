@@ -150,3 +150,30 @@ def verify(controller: Controller, limit: Controller, s_true: Model, p_true: Mod
                                     np.array(measured_attenuation(d, ours.e, fs)),
                                     np.array(measured_attenuation(d, best.e, fs)), finite and largest < 1.0, largest))
     return results
+
+
+def predicted_and_achieved(controller: Controller, s_true: Model, p_true: Model | None = None, disturbance=None,
+                           seconds: float = 2.0, seed: int = 0) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+    """(predicted, achieved) dB per band and configuration for one disturbance: predicted on the
+    controller's internal model (``anc.design.predict``), achieved sample by sample on ``s_true``
+    (and ``p_true`` for the reference path). ``disturbance`` defaults to the documented default
+    with ``p_true``; without ``p_true`` there is no reference and only "fb" is returned."""
+    from .design import predict
+    from .disturbance import default_disturbance, synthesize
+
+    fs = s_true.fs
+    disturbance = disturbance or default_disturbance(fs, p_true)
+    if p_true is None and disturbance.has_reference:
+        raise ValueError("a disturbance with a reference needs the true reference path p_true")
+    ff = controller.ff if disturbance.has_reference else None
+    predicted_all, _, _ = predict(controller.internal_model, disturbance, controller.latency_samples, controller.fb, ff)
+    x, u = synthesize(disturbance, int(round(seconds * fs)), fs, seed)
+    d = u if x is None else p_true.simulate(x) + u
+    predicted, achieved = {}, {}
+    for part, use_ff, use_fb in (("ff", True, False), ("fb", False, True), ("both", True, True)):
+        if (use_ff and ff is None) or (use_fb and controller.fb is None):
+            continue
+        run = run_closed_loop(controller, s_true, d, x, use_ff, use_fb)
+        predicted[part] = predicted_all[part]
+        achieved[part] = measured_attenuation(d, run.e, fs)
+    return predicted, achieved

@@ -34,11 +34,13 @@ __all__ = ["DesignOptions", "design", "predict"]
 class DesignOptions:
     """Design choices. ``latency`` in samples (>= 1: the drive at k uses measurements up to
     k - latency; converter delays are inside the identified S); Laguerre pole ``corner_hz``
-    and ``order`` of each filter; bounds in dB."""
+    and ``order`` of each filter; the feedback filter's DC-blocking corner ``highpass_hz``; bounds in dB."""
 
     latency: int = 1
     corner_hz: float = 250.0
     order: int = 24
+    # Q's DC-blocking corner (``anc.basis``): two octaves below the 20 Hz band edge.
+    highpass_hz: float = 5.0
     max_amplification_db: float = 6.0
     max_ff_gain_db: float = 30.0
     feedback: bool = True
@@ -48,7 +50,7 @@ class DesignOptions:
 def _balanced(basis: LaguerreBasis, coefficients: np.ndarray) -> StateSpaceFilter:
     A, B, C, D = basis.statespace(coefficients)
     hsv_max = float(np.max(np.abs(coefficients[1:]))) if coefficients.size > 1 else 0.0
-    if hsv_max == 0.0:
+    if hsv_max == 0.0 and basis.highpass_pole is None:
         return StateSpaceFilter(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[coefficients[0]]]))
     Ab, Bb, Cb, Db, hsv = balanced_realisation(A, B, C, D)
     keep = int(np.sum(hsv > 1e-9 * hsv[0]))
@@ -108,14 +110,15 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     disturbance = disturbance or default_disturbance(fb_model.fs, ff_model)
     uncertainty = uncertainty or model_uncertainty(fb_model)
     basis = LaguerreBasis.at(options.corner_hz, options.order, fb_model.fs)
+    fb_basis = LaguerreBasis.at(options.corner_hz, options.order, fb_model.fs, options.highpass_hz)
     notes: list[str] = []
     fb = ff = None
     margins: dict = {}
     loop_fn = None
     if options.feedback:
-        fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty, basis,
+        fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty, fb_basis,
                                     options.max_amplification_db)
-        fb = _balanced(basis, fb_design.coefficients)
+        fb = _balanced(fb_basis, fb_design.coefficients)
         # Margins of the stored (balanced, truncated) filter, not of the coefficients.
         f = fb_design.frequencies_hz
         G = fb_model.frequency_response(f) * np.exp(-2j * np.pi * f * options.latency / fb_model.fs)
@@ -142,7 +145,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         "disturbance": disturbance.source,
         "uncertainty": uncertainty.to_dict(),
         "options": asdict(options),
-        "basis": {"kind": "Laguerre", "pole": basis.pole, "order": basis.order},
+        "basis": {"kind": "Laguerre", "pole": basis.pole, "order": basis.order,
+                  "feedback_highpass_pole": fb_basis.highpass_pole},
         "design_seconds_cpu": time.process_time() - started,
     }
     info.update(provenance or {})

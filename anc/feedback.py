@@ -61,8 +61,13 @@ class FeedbackDesign:
 
 
 def design_grid(fs: float, points: int = 4096) -> np.ndarray:
-    """Uniform design grid from fs / (2 points) to fs / 2 (Hz); fine enough for 20 Hz bands at 48 kHz."""
-    return np.linspace(fs / (2 * points), fs / 2.0, points)
+    """Design grid (Hz): DC, 32 log-spaced points from 0.5 Hz, then uniform from fs / (2 points) to fs / 2.
+
+    The uniform part is fine enough for 20 Hz bands at 48 kHz; the points below it hold Q's
+    gain near DC, where the model is an extrapolation and a loop can drift unstable.
+    """
+    uniform = np.linspace(fs / (2 * points), fs / 2.0, points)
+    return np.concatenate(([0.0], np.geomspace(0.5, uniform[0], 33)[:-1], uniform))
 
 
 def loop_margins(loop: np.ndarray, frequencies_hz: np.ndarray, relative_95: np.ndarray, s_model_q: np.ndarray) -> dict:
@@ -142,9 +147,16 @@ def design_feedback(s_model: Model, disturbance: Disturbance, latency: int, unce
     loop = G * Q
     usage = r95 * np.abs(loop) / ROBUSTNESS_BOUND
     outside = (f < uncertainty.band_hz[0]) | (f > uncertainty.band_hz[1])
+    peak = "" if uncertainty.peak is None else f" (peak {uncertainty.peak:.3g})"
     if np.any(outside):
         notes.append(f"outside the model's stated band {uncertainty.band_hz[0]:.0f}-{uncertainty.band_hz[1]:.0f} Hz "
-                     f"({uncertainty.source}) the relative uncertainty is taken as 100 %: |S_model Q| <= 0.5 there")
+                     f"({uncertainty.source}) nothing is known of S: only a gain no larger than the model vouches for "
+                     f"in band{peak}, growing at most as 1/f below it, is assumed, and |Q| <= 0.5 / (|S_model| + that "
+                     "gain) there")
+    unreliable = uncertainty.unknown(f) & ~outside
+    if np.any(unreliable):
+        notes.append("conservative where the model's stated 95 % error reaches 100 % (the band is a first-order bound "
+                     "and no bound there; feedback does almost nothing) at " + _ranges(f, unreliable))
     active = usage > 0.9
     if np.any(active):
         notes.append("robustness bound active (gain limited by the model's uncertainty) at " + _ranges(f, active))

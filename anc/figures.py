@@ -19,7 +19,8 @@ from sysid.report.style import COLORS, new_figure
 from .controller import Controller
 from .uncertainty import model_uncertainty
 
-__all__ = ["sensitivity_figure", "nyquist_figure", "attenuation_figure", "control_page"]
+__all__ = ["sensitivity_figure", "nyquist_figure", "attenuation_figure", "refinement_figure", "refinement_table_html",
+           "control_section", "control_page"]
 
 
 def _loop(controller: Controller, f: np.ndarray) -> np.ndarray:
@@ -93,18 +94,71 @@ def _img(figure, dpi: float, caption: str) -> str:
     return f'<figure><img alt="{escape(caption)}" src="data:image/png;base64,{png}"><figcaption>{escape(caption)}</figcaption></figure>'
 
 
-def control_page(controller: Controller, achieved: dict[str, list[float]] | None = None, dpi: float = 100.0) -> str:
-    """Standalone HTML page: attenuation table, margins, notes and the three figures."""
+def refinement_figure(steps, dpi: float = 100.0, part: str = "both"):
+    """Predicted attenuation per band (dB) of the design on each model of a refinement history
+    (``anc.refinement.attenuation_along``), one line per step."""
+    figure, (ax,) = new_figure(dpi=dpi)
+    for step in steps:
+        if step.controller is not None:
+            ax.semilogx(step.controller.bands_hz, step.predicted_db[part], marker=".", label=step.label)
+    ax.axhline(0.0, color="0.3", linewidth=0.6)
+    ax.set_xlabel("third-octave band centre (Hz)")
+    ax.set_ylabel(f"predicted attenuation, {part} (dB)")
+    ax.legend(fontsize="small")
+    return figure
+
+
+def refinement_table_html(steps, achieved: list[float | None] | None = None) -> str:
+    """HTML table: per step of a refinement history, rms / noise floor, predicted mean attenuation
+    50 Hz - 1 kHz (dB) for ff, fb, both, and (when given) the achieved mean for both, or the refusal."""
+    parts = ("ff", "fb", "both")
+    head = ("<tr><th>model</th><th>rms / noise floor</th>" + "".join(f"<th>{p} predicted (dB)</th>" for p in parts)
+            + ("<th>both achieved (dB)</th>" if achieved else "") + "</tr>")
+    rows = []
+    for i, step in enumerate(steps):
+        ratio = "" if step.rms_ratio is None else f"{step.rms_ratio:.2f}"
+        if step.controller is None:
+            cells = f'<td colspan="{len(parts) + bool(achieved)}">refused: {escape(step.refused or "")}</td>'
+        else:
+            cells = "".join(f"<td>{step.mean_db(p):.1f}</td>" for p in parts)
+            if achieved:
+                cells += "<td></td>" if achieved[i] is None else f"<td>{achieved[i]:.1f}</td>"
+        rows.append(f"<tr><td>{escape(step.label)}</td><td>{ratio}</td>{cells}</tr>")
+    return '<table class="numbers">' + head + "".join(rows) + "</table>"
+
+
+def control_section(controller: Controller, achieved: dict[str, list[float]] | None = None, steps=None,
+                    dpi: float = 100.0, achieved_note: str = "") -> str:
+    """HTML body of the control section: attenuation table, margins, notes, the figures (attenuation
+    predicted vs achieved, sensitivity, Nyquist with the uncertainty discs) and, with ``steps``
+    (``anc.refinement.attenuation_along``), the refinement table and figure."""
+    parts = ("ff", "fb", "both")
+    head = "<tr><th>band (Hz)</th>" + "".join(f"<th>{p} predicted (dB)</th>" for p in parts)
+    head += "".join(f"<th>{p} achieved (dB)</th>" for p in parts if achieved and p in achieved) + "</tr>"
     rows = "".join(f"<tr><td>{c:g}</td>" + "".join(f"<td>{controller.predicted_attenuation_db[p][i]:.1f}</td>"
-                                                  for p in ("ff", "fb", "both")) + "</tr>"
+                                                  for p in parts)
+                   + "".join(f"<td>{achieved[p][i]:.1f}</td>" for p in parts if achieved and p in achieved) + "</tr>"
                    for i, c in enumerate(controller.bands_hz))
     margins = "".join(f"<li>{escape(k)}: {escape(str(v))}</li>" for k, v in controller.margins.items())
     notes = "".join(f"<li>{escape(n)}</li>" for n in controller.notes)
-    figures = [_img(attenuation_figure(controller, achieved, dpi), dpi, "Attenuation per third-octave band")]
+    figures = [_img(attenuation_figure(controller, achieved, dpi), dpi,
+                    "Attenuation per third-octave band: predicted (lines)" + (", achieved (markers)" if achieved else ""))]
     if controller.fb is not None:
         figures += [_img(sensitivity_figure(controller, dpi), dpi, "Sensitivity |1 + G Q| and robustness usage"),
                     _img(nyquist_figure(controller, dpi), dpi, "Nyquist plot of the loop with the 95 % uncertainty discs")]
+    body = (f"<p>{escape(achieved_note)}</p>" if achieved_note else "") + (
+        '<div class="scroll"><table class="numbers">' + head + rows + "</table></div>"
+        f"<h3>Margins</h3><ul>{margins}</ul><h3>Notes</h3><ul>{notes}</ul>" + "".join(figures))
+    if steps:
+        body += ("<h3>Refinement and control</h3><p>Per model of the refinement history: a design on that model "
+                 "(its own uncertainty band) and the attenuation it predicts on it, mean over 50 Hz - 1 kHz.</p>"
+                 + refinement_table_html(steps)
+                 + _img(refinement_figure(steps, dpi), dpi, "Predicted attenuation (both) per band, per refinement step"))
+    return body
+
+
+def control_page(controller: Controller, achieved: dict[str, list[float]] | None = None, dpi: float = 100.0) -> str:
+    """Standalone HTML page (``design --report``): ``control_section`` with the report's generator tag."""
     return ('<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="generator" content="helmet-anc">'
             "<title>helmet-anc control</title></head><body><h1>Control</h1>"
-            "<table><tr><th>band (Hz)</th><th>ff (dB)</th><th>fb (dB)</th><th>both (dB)</th></tr>" + rows + "</table>"
-            f"<h2>Margins</h2><ul>{margins}</ul><h2>Notes</h2><ul>{notes}</ul>" + "".join(figures) + "</body></html>\n")
+            + control_section(controller, achieved, dpi=dpi) + "</body></html>\n")

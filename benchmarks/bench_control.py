@@ -52,6 +52,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--fxlms-seconds", type=float, default=4.0)
     args = parser.parse_args()
+    wall, cpu = time.perf_counter(), time.process_time()
     print("| helmet | part | predicted | ours achieved | true-plant design | FxLMS converged (time) | worst band error | stable | design CPU s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, s_session, p_session in _sessions(args):
@@ -77,6 +78,7 @@ def main() -> None:
             print(f"| {name} | {r.part} | {np.mean(r.predicted[CHECKED]):.1f} | {np.mean(r.achieved[CHECKED]):.1f} | "
                   f"{np.mean(r.limit[CHECKED]):.1f} | {fx} | {worst:.2f} | {r.stable} | {seconds:.2f} |")
         sys.stdout.flush()
+    print(f"\ntotal: {time.perf_counter() - wall:.0f} s wall, {time.process_time() - cpu:.0f} s CPU")
 
 
 if __name__ == "__main__":

@@ -18,9 +18,40 @@ def register(commands) -> None:
     parser.add_argument("--grid", choices=GRID_CHOICES, default="modest",
                         help="recompute the (gamma, order) grid over a modest range, or skip it (default modest)")
     parser.add_argument("--dpi", type=float, default=100.0, help="resolution of the embedded figures (default 100)")
+    parser.add_argument("--controller", metavar="controller.json",
+                        help="add a control section for this controller (helmet-anc design): attenuation predicted on "
+                             "its model vs achieved on this report's model, sensitivity, Nyquist, refinement table")
     parser.add_argument("-o", "--output", required=True, metavar="report.html")
     add_force_option(parser)
     parser.set_defaults(handler=run)
+
+
+def control_section(path: str, model, dpi: float) -> tuple[str, str, str]:
+    """("control", heading, HTML) for --controller: the controller's predictions on its internal model
+    against the closed loop run sample by sample on this report's model (for an FB model: Q on it;
+    for an FF model: W and Q with it as the reference path and the internal model as S), and the
+    predictions of a design on each of the two models (anc.refinement)."""
+    from anc import Controller
+    from anc.closed_loop import predicted_and_achieved
+    from anc.figures import control_section as section_html
+    from anc.refinement import attenuation_along
+
+    controller = Controller.load(path)
+    if controller.fs != model.fs:
+        raise HelmetAncError(f"--controller {path}: designed at {controller.fs:g} Hz, the model is at {model.fs:g} Hz; "
+                             "give the controller designed for this helmet")
+    s_true, p_true = (model, None) if model.path == "fb" else (controller.internal_model, model)
+    predicted, achieved = predicted_and_achieved(controller, s_true, p_true)
+    controller.predicted_attenuation_db.update(predicted)
+    steps = None
+    if model.path == "fb" and model.to_dict() != controller.internal_model.to_dict():
+        steps = attenuation_along([controller.internal_model, model],
+                                  labels=["the controller's model", "this report's model"])
+    note = ("Predicted: on the controller's internal model with the default wind-and-engine spectrum"
+            + (" and this FF model as the reference path" if p_true is not None else " (no reference: feedback only)")
+            + "; achieved: the same controller run sample by sample (float64, its latency) on "
+            + ("this report's FB model." if p_true is None else "its internal FB model with this report's FF model."))
+    return "control", "6. Control", section_html(controller, achieved, steps, dpi, note)
 
 
 def run(args) -> int:
@@ -35,6 +66,7 @@ def run(args) -> int:
     )
 
     with busy("report: grid, diagnosis and figures", args.quiet):
-        written = write_report(output, model, noise, sweeps, grid=args.grid, dpi=args.dpi)
+        extra = [control_section(args.controller, model, args.dpi)] if args.controller else []
+        written = write_report(output, model, noise, sweeps, grid=args.grid, dpi=args.dpi, extra_sections=extra)
     print(f"wrote {written}")
     return 0

@@ -248,8 +248,12 @@ def _tables_html(data: ReportData) -> str:
     return "\n".join(parts)
 
 
-def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None) -> str:
-    """The report page as an HTML string."""
+def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None, extra_sections=()) -> str:
+    """The report page as an HTML string.
+
+    ``extra_sections``: (key, heading, HTML body) triples the caller appends after the
+    report's own sections (e.g. the control section, built outside sysid).
+    """
     model = data.model
     title = title or f"helmet-anc report: {model.path.upper()} path model"
     figures = report_figures(data)
@@ -262,9 +266,13 @@ def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None
     if model.history:
         body["diagnosis"].append(history_table(model.history))
     body["tables"].append(_tables_html(data))
-    contents = "<nav><ul>" + "".join(f'<li><a href="#{key}">{escape(heading)}</a></li>' for key, heading in SECTIONS) + "</ul></nav>"
+    headings = list(SECTIONS)
+    for key, heading, html in extra_sections:
+        headings.append((key, heading))
+        body[key] = [html]
+    contents = "<nav><ul>" + "".join(f'<li><a href="#{key}">{escape(heading)}</a></li>' for key, heading in headings) + "</ul></nav>"
     sections = "\n".join(f'<section id="{key}"><h2>{escape(heading)}</h2>\n' + "\n".join(body[key]) + "</section>"
-                         for key, heading in SECTIONS)
+                         for key, heading in headings)
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1">'
             f'<meta name="generator" content="helmet-anc">'
@@ -273,14 +281,14 @@ def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None
 
 
 def write_report(path, model, noise, sweeps, identification=None, findings=None, *, dpi: float = 100.0,
-                 grid: str = "modest", transient_s: float = 3.0) -> Path:
+                 grid: str = "modest", transient_s: float = 3.0, extra_sections=()) -> Path:
     """Write the HTML report of model on the recordings to path and return the file written.
 
     ``identification`` (an ``Identification``) supplies spectra, grid and seed model;
     without it they are recomputed (``grid``: "modest" or "skip", see ``sysid.report.data``).
     ``findings`` defaults to ``sysid.diagnose.diagnose``'s. When path is an existing
     folder the file is ``<path>/<fb|ff>-report.html``. The file appears only once
-    complete (written beside it and renamed).
+    complete (written beside it and renamed). ``extra_sections``: see ``render_report``.
     """
     target = Path(path)
     if target.is_dir():
@@ -289,5 +297,5 @@ def write_report(path, model, noise, sweeps, identification=None, findings=None,
     if not folder.is_dir():
         raise HelmetAncError(f"{target}: folder {folder} does not exist")
     data = prepare_report_data(model, noise, sweeps, identification, findings, grid, transient_s)
-    atomic_write_text(target, render_report(data, dpi))
+    atomic_write_text(target, render_report(data, dpi, extra_sections=extra_sections))
     return target
