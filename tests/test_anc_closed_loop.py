@@ -25,6 +25,10 @@ def _identified(session):
     return identify(session.noise, session.sweeps, session.spec.path, FAST_OPTIONS).model
 
 
+class ShortOfTruth(AssertionError):
+    """Stable and as predicted, but more than 1 dB below the design on the true plants (50 Hz-1 kHz)."""
+
+
 def _check(s_true, p_true, s_id, p_id, seed=0):
     disturbance = default_disturbance(s_id.fs, p_id)
     ours = design(s_id, p_id, disturbance)
@@ -35,7 +39,8 @@ def _check(s_true, p_true, s_id, p_id, seed=0):
         worst = np.max(np.abs(r.achieved - r.predicted)[CHECKED])
         assert worst <= 2.0, f"{r.part}: achieved differs from predicted by {worst:.2f} dB in a band 50 Hz-1 kHz"
         gap = np.mean(r.limit[CHECKED]) - np.mean(r.achieved[CHECKED])
-        assert gap <= 1.0, f"{r.part}: {gap:.2f} dB below the true-plant design on average 50 Hz-1 kHz"
+        if gap > 1.0:
+            raise ShortOfTruth(f"{r.part}: {gap:.2f} dB below the true-plant design on average 50 Hz-1 kHz")
     return results
 
 
@@ -55,12 +60,14 @@ def _random_pair(seed):
 
 
 def _check_random(seed):
-    """Checks of a random helmet; a model that validates far above its noise floor must be refused."""
+    """Checks of a random helmet; a model with no uncertainty band that validates far above its noise
+    floor must be refused (one with a band is designed within it)."""
     fb_seed, ff_seed = _random_pair(seed)
     s_session = random_session(fb_seed, "fb", **SHORT)
     p_session = random_session(ff_seed, "ff", **SHORT)
     s_id, p_id = _identified(s_session), _identified(p_session)
-    poor = [m for m in (s_id, p_id) if m.identification["rms"] > 3.0 * m.identification["noise_floor"]]
+    poor = [m for m in (s_id, p_id)
+            if m.uncertainty is None and m.identification["rms"] > 3.0 * m.identification["noise_floor"]]
     if poor:
         with pytest.raises(HelmetAncError, match="noise floor"):
             design(s_id, p_id)
@@ -68,18 +75,28 @@ def _check_random(seed):
     _check(s_session.plant, p_session.plant, s_id, p_id, seed=seed)
 
 
-# Known defect: identified models carry no uncertainty band yet, so designs use the 20 % default in
-# band; random helmet 3's "both" design falls 7.4 dB short of the true-plant design, and random helmet 1's
-# identified FB model is 100-850 % wrong below 1 kHz while validating under 3x its floor (loop unstable).
-@pytest.mark.xfail(strict=True, reason="identified models state no uncertainty band yet (20 % default)")
-@pytest.mark.parametrize("seed", [3])
+# Helmets whose design is stable and achieves what it predicts but falls more than 1 dB short of the
+# design on the true plants, and why (BENCHMARKS.md, Control).
+SHORT_OF_TRUTH = {
+    1: "the identified FB model misses a mode near 30 Hz (10x its noise floor; 3.4x |S_model| off at 30 Hz) and "
+       "states 95 % errors >= 100 % at 22-43 Hz, where the design must then leave the wind noise alone",
+    3: "the FB model's stated band is >= 100 % at 23-88 and 111-193 Hz although the model is within 0.5 % of the "
+       "truth there (the band is too wide by two to four decades), so the design stays out of those bands",
+}
+
+
+def _random_cases(seeds):
+    return [pytest.param(seed, marks=pytest.mark.xfail(strict=True, raises=ShortOfTruth, reason=SHORT_OF_TRUTH[seed]))
+            if seed in SHORT_OF_TRUTH else seed for seed in seeds]
+
+
+@pytest.mark.parametrize("seed", _random_cases([5]))
 def test_random_plants_identified_match_truth(seed):
     _check_random(seed)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="identified models state no uncertainty band yet (20 % default)")
-@pytest.mark.parametrize("seed", [1, 2, *range(4, 14)])
+@pytest.mark.parametrize("seed", _random_cases([1, 2, 3, 4, *range(6, 14)]))
 def test_random_plants_identified_match_truth_slow(seed):
     _check_random(seed)
 

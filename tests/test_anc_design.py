@@ -23,14 +23,17 @@ def seed_controller():
     return design(appendix_a_model("fb"), appendix_a_model("ff"))
 
 
-def test_laguerre_statespace_matches_responses():
-    basis = LaguerreBasis.at(250.0, 6, 44100.0)
+@pytest.mark.parametrize("highpass_hz", [None, 5.0])
+def test_laguerre_statespace_matches_responses(highpass_hz):
+    basis = LaguerreBasis.at(250.0, 6, 44100.0, highpass_hz)
     c = np.arange(1.0, 8.0)
     A, B, C, D = basis.statespace(c)
     f = np.array([30.0, 300.0, 3000.0])
     z = np.exp(2j * np.pi * f / 44100.0)
-    direct = np.array([(C @ np.linalg.solve(zi * np.eye(6) - A, B))[0, 0] + D[0, 0] for zi in z])
-    np.testing.assert_allclose(direct, basis.responses(f, 44100.0) @ c, rtol=1e-10)
+    direct = np.array([(C @ np.linalg.solve(zi * np.eye(A.shape[0]) - A, B))[0, 0] + D[0, 0] for zi in z])
+    np.testing.assert_allclose(direct, basis.responses(f, 44100.0) @ c, rtol=1e-8)
+    if highpass_hz is not None:
+        assert np.all(np.abs(basis.responses([0.0], 44100.0)) == 0.0)  # the double zero at DC
 
 
 def test_json_round_trip_keeps_the_contract(seed_controller, tmp_path):
@@ -56,8 +59,14 @@ def test_unstable_filter_in_json_is_refused(seed_controller):
 
 def test_filters_are_stable_and_moderate(seed_controller):
     for filt in (seed_controller.fb, seed_controller.ff):
-        assert filt.order <= 32
+        assert filt.order <= 34  # 24 Laguerre states (+ Q's 2-state DC block)
         assert np.max(np.abs(np.linalg.eigvals(filt.A))) < 1.0
+
+
+def test_feedback_filter_blocks_dc(seed_controller):
+    """Q has no gain at DC, where the model is an extrapolation (the seed's FB path is 30x larger there)."""
+    q = np.abs(seed_controller.fb.frequency_response([0.0, 1.0, 100.0], seed_controller.fs))
+    assert q[0] < 1e-6 * q[2] and q[1] < 0.05 * q[2]
 
 
 def test_margins_reported(seed_controller):
