@@ -1,9 +1,10 @@
 """Sample-by-sample Python twins of the generated filters and of the board's control loop.
 
 :class:`FixedStepper` and :class:`Float32Stepper` run a generated filter one block at a
-time with its state carried over, operation for operation as the generated C (and as
-:func:`codegen.reference.fixed_reference` / :func:`codegen.reference.float32_reference`,
-which process whole signals: a closed loop needs each output before the next input).
+time with its state carried over (a closed loop needs each output before the next input):
+the Q15 one chains :func:`codegen.reference.fixed_section`, the specification of the
+generated code; the float32 one performs the operations of
+:func:`codegen.reference.float32_reference` (which takes whole signals) in the same order.
 :func:`board_loop` is the twin of ``firmware/closed_loop.c`` running
 ``firmware/anc_control.c``: the quantised controller against a simulated true plant, in
 the codec's frame order, with the same limiter; its Q15 run equals the C bit for bit.
@@ -12,7 +13,7 @@ the codec's frame order, with the same limiter; its Q15 run equals the C bit for
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,90 +21,40 @@ from sysid.model import Model
 
 from .fixedpoint import FixedDesign
 from .float32 import FloatDesign
+from .reference import fixed_input, fixed_section, q31_to_q15_output
 
 __all__ = ["BoardRun", "FixedStepper", "Float32Stepper", "Limits", "board_loop"]
 
-_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 _f32 = np.float32
 
 
 class FixedStepper:
-    """The generated Q15 filter of ``design`` (module :mod:`codegen.fixedpoint`), block by block."""
+    """The generated Q15 filter of ``design`` (module :mod:`codegen.fixedpoint`), block by block:
+    :func:`codegen.reference.fixed_section` per section with its state carried over."""
 
     def __init__(self, design: FixedDesign):
         self.design = design
-        self.efb = design.quantiser == "efb"
-        self.steps = [self._section_step(s) for s in design.sections]
+        # The delay line is kept here; the input polynomial is memoryless.
+        self._undelayed = replace(design, delay=0)
         self.reset()
 
-    def _section_step(self, section):
-        """f(v, x1, x2, y1, y2, e) -> (y, e) of one section, for the design's section form:
-        delta feedback with error feedback (``c``, ``b_align``, ``c_align``, ``shift``) or direct
-        form I with the output in the accumulator's high word (``a``, ``guard``, ``feedback_shift``)."""
-        order, efb = section.order, self.efb
-        if hasattr(section, "c"):
-            (b0, b1, b2), (c1, c2) = section.b, section.c
-            b_align, c_align, shift = section.b_align, section.c_align, section.shift
-            mask, half = (1 << shift) - 1, 1 << (shift - 1)
-
-            def step(v, x1, x2, y1, y2, e):
-                acc = (b0 * v + b1 * x1 + b2 * x2) >> b_align
-                acc += (c1 * y1 + c2 * y2) >> c_align
-                if efb:
-                    acc += e
-                    e = acc & mask
-                else:
-                    acc += half
-                w = acc >> shift
-                if order == 2:
-                    w += 2 * y1 - y2
-                elif order == 1:
-                    w += y1
-                return (_INT32_MAX if w > _INT32_MAX else (_INT32_MIN if w < _INT32_MIN else w)), e
-            return step
-        (b0, b1, b2), (a1, a2) = section.b, section.a
-        guard, d = section.guard, section.feedback_shift
-        low, high = -(1 << (31 - guard)), (1 << (31 - guard)) - 1
-
-        def step(v, x1, x2, y1, y2, e):
-            acc = (e if efb else 1 << 31) + ((a1 * y1 + a2 * y2) >> d) + b0 * v + b1 * x1 + b2 * x2
-            w = acc >> 32
-            return (high if w > high else (low if w < low else w)) << guard, acc & 0xFFFFFFFF
-        return step
-
     def reset(self) -> None:
-        self.h = [[0, 0] for _ in range(len(self.steps) + 1)]
-        self.e = [0] * len(self.steps)
+        self.states = [None] * len(self.design.sections)
         self.line = [0] * self.design.delay
         self.pos = 0
 
-    def step(self, u: int) -> int:
-        """One Q15 input word -> one Q15 output word."""
-        design = self.design
-        if design.delay:
-            u, self.line[self.pos] = self.line[self.pos], int(u)
-            self.pos = 0 if self.pos + 1 == design.delay else self.pos + 1
-        u = int(u)
-        if design.polynomial is None:
-            v = u * 65536
-        else:
-            p = design.polynomial[-1]
-            for a in design.polynomial[-2::-1]:
-                p = a + ((p * u) >> 15)
-            v = (p * u) >> 15
-        h, e = self.h, self.e
-        for k, step in enumerate(self.steps):
-            x1, x2 = h[k]
-            y1, y2 = h[k + 1]
-            w, e[k] = step(v, x1, x2, y1, y2, e[k])
-            h[k] = [v, x1]
-            v = w
-        h[-1] = [v, h[-1][0]]
-        out = (v + 32768) >> 16
-        return 32767 if out > 32767 else out
-
     def process(self, block) -> list[int]:
-        return [self.step(u) for u in block]
+        """Q15 input words -> Q15 output words."""
+        delay = self.design.delay
+        words = [int(u) for u in block]
+        if delay:
+            for i, u in enumerate(words):
+                words[i], self.line[self.pos] = self.line[self.pos], u
+                self.pos = 0 if self.pos + 1 == delay else self.pos + 1
+        x = fixed_input(self._undelayed, np.array(words, np.int16))
+        for k, section in enumerate(self.design.sections):
+            x, self.states[k] = fixed_section(section, x, self.design.quantiser, self.states[k])
+        return q31_to_q15_output(x).tolist()
 
 
 class Float32Stepper:

@@ -78,11 +78,11 @@ def test_feedback_only_controller(controller, tmp_path):
 
 
 def test_headroom_is_the_l1_norm(plan):
-    """The worst-case gains are sum |h| of each realised filter (the exact worst case), and the
-    drive's is the sum of Q's and W's."""
-    impulse = np.zeros(200000)
+    """The worst-case gains of Q and W are sum |h| of the realised filters (the exact worst case;
+    their clustered poles decay within 30000 samples), and the drive's is the sum of the two."""
+    impulse = np.zeros(30000)
     impulse[0] = 1.0
-    for part in ("model", "fb", "ff"):
+    for part in ("fb", "ff"):
         r = plan.plans[part].realisation
         h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
         assert plan.headroom[part]["l1_gain"] == pytest.approx(np.sum(np.abs(h)), rel=1e-6)
@@ -91,11 +91,12 @@ def test_headroom_is_the_l1_norm(plan):
     assert drive["saturates"] == (drive["worst_case_peak"] > 1.0)
 
 
-@pytest.mark.parametrize("part", ["model", "fb"])
+@pytest.mark.parametrize("part", ["model", "fb", "ff"])
 def test_worst_case_input_saturates_never_wraps(generated, plan, part):
     """The full-scale input that attains the L1 bound (the reversed signs of the impulse response),
-    its negation and itself again: the generated C reaches the positive rail where the bound is
-    attained and equals the saturating reference word for word (a wrap would differ by 65536)."""
+    its negation and itself again: the generated C equals the saturating reference word for word
+    (a wrap would differ by 65536); where no section can saturate it attains the linear bound, and
+    the internal model (L1 gain 754) reaches the positive rail."""
     name = FILTER_NAMES[part]
     folder = generated.outdir
     host = build_host(name, (folder / f"{name}_filter.h").read_text(), (folder / f"{name}_filter.c").read_text())
@@ -103,12 +104,16 @@ def test_worst_case_input_saturates_never_wraps(generated, plan, part):
     impulse = np.zeros(4000)
     impulse[0] = 1.0
     h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
-    assert plan.headroom[part]["l1_gain"] > 1.0  # these two can be driven beyond full scale
     worst = np.where(h[::-1] >= 0, 32767, -32768).astype(np.int16)
-    worst = np.concatenate((worst, -worst.astype(np.int32).clip(-32768, 32767).astype(np.int16), worst))
+    worst = np.concatenate((worst, (-worst.astype(np.int32)).clip(-32768, 32767).astype(np.int16), worst))
     out = host.process_q15(worst)
     np.testing.assert_array_equal(out, fixed_reference(plan.fixed(part), worst))
-    assert out[h.size - 1] == 32767 and out[-1] == 32767
+    if plan.headroom[part]["safe_input_peak_dbfs"] >= 0.0:
+        # No section can saturate: the output attains the linear bound.
+        bound = 32768 * np.sum(np.abs(h))
+        assert abs(int(out[h.size - 1]) - min(bound, 32767)) <= 0.01 * bound + 4
+    elif part == "model":
+        assert out[h.size - 1] == 32767
 
 
 def test_refusals(controller, tmp_path):

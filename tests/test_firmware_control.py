@@ -88,14 +88,22 @@ def _outputs(work: Path):
     return np.fromfile(work / "ear.q15", np.int16), np.fromfile(work / "drive.q15", np.int16), status
 
 
+def _executable(setup, variant: str) -> Path:
+    """firmware/closed_loop.c built natively for the variant, once per module."""
+    folder = setup["root"] / f"bin_{variant}"
+    exe = folder / "build" / "closed_loop_host"
+    if not exe.exists():
+        folder.mkdir(exist_ok=True)
+        _make("closed-loop-host", folder, CTL=setup["root"] / "ctl2",
+              CONTROL="-DANC_CONTROL_F32" if variant == "float" else "")
+    return exe
+
+
 def _run_host(setup, name, plant, d, chin, variant="q15"):
-    """Build and run firmware/closed_loop.c natively; returns (ear, drive, status)."""
+    """Run firmware/closed_loop.c natively on the given plant and signals; returns (ear, drive, status)."""
     work = setup["root"] / name
-    build = f"build_{variant}"
     _write_inputs(work, plant, d, chin)
-    _make("closed-loop-host", work, CTL=setup["root"] / "ctl2", BUILD=build,
-          CONTROL="-DANC_CONTROL_F32" if variant == "float" else "")
-    result = subprocess.run([str(work / build / "closed_loop_host")], cwd=work, capture_output=True, text=True,
+    result = subprocess.run([str(_executable(setup, variant))], cwd=work, capture_output=True, text=True,
                             check=False, timeout=120)
     assert result.returncode == 0 and "closed loop done" in result.stdout, result.stdout + result.stderr
     return _outputs(work)
@@ -163,21 +171,24 @@ def test_qemu_closed_loop_equals_host(setup, host_runs, variant):
 def test_limiter_mutes_destabilised_loop(setup):
     """The true speaker is wired the wrong way round (S_true = -S_model): the IMC loop gain is about
     -2 Q S and, without the limiter, d_hat and the drive grow to the rails. With it, the drive is
-    muted (from the growth of d_hat, or at the latest ANC_LIMIT_RAIL_SAMPLES frames after the rails
-    are reached) and the DAC plays zeros from ANC_PROCESSING_LATENCY frames after the trip on; the
-    C equals the twin word for word."""
+    muted (from the growth of d_hat, or from the rails within the stated number of frames) and the
+    DAC plays zeros from ANC_PROCESSING_LATENCY frames after the trip on; the C equals the twin
+    word for word."""
     s = setup["s_true"]
     flipped = Model(path="fb", fs=s.fs, A=s.A, B=s.B, C=-s.C, D=-s.D, delay=s.delay)
     limits = Limits()
-    c_run = _run_host(setup, "unstable", flipped, setup["d"], setup["chin"])
-    twin = board_loop(setup["plan"], flipped, setup["d"], setup["chin"], "q15", limits=limits)
+    d, chin = setup["d"][:12000], setup["chin"][:12000]
+    c_run = _run_host(setup, "unstable", flipped, d, chin)
+    twin = board_loop(setup["plan"], flipped, d, chin, "q15", limits=limits)
     _assert_same_run(c_run, twin)
-    unlimited = board_loop(setup["plan"], flipped, setup["d"], setup["chin"], "q15",
-                           limits=Limits(rail_samples=10**9, growth_windows=10**9))
+    unlimited = board_loop(setup["plan"], flipped, d, chin, "q15", limits=Limits(rail_samples=10**9, growth_windows=10**9))
     rails = np.nonzero((np.abs(unlimited.drive.astype(int)) >= 32767) | (np.abs(unlimited.d_hat.astype(int)) >= 32767))[0]
     assert rails.size, "the destabilised loop should reach the rails without the limiter"
     assert twin.trips == 1 and twin.muted in (1, 2)
-    assert twin.muted_at <= rails[0] + limits.rail_samples
+    if twin.muted == 1:
+        # The stated bound for rails touched in a fraction p of the frames (anc_control.h).
+        p = np.mean(np.isin(np.arange(rails[0], twin.muted_at + 1), rails))
+        assert p > 1 / 9 and twin.muted_at - rails[0] <= 8 * limits.rail_samples / (9 * p - 1)
     # The drive computed at the trip frame is already zero; it is played 2 frames later (B = 1).
     np.testing.assert_array_equal(twin.drive[: twin.muted_at + 2], unlimited.drive[: twin.muted_at + 2])
     assert np.all(twin.drive[twin.muted_at + 2:] == 0)
