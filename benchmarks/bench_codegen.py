@@ -416,9 +416,10 @@ def render(snr: dict, generated: dict, cmsis: dict, sizes: dict, seconds: float)
               "The previous generated kernel (delta-form sections with separately aligned numerator and feedback "
               "sums, 64-bit shifts and compares, sample after sample) took 43.0 instructions per sample and section "
               "on the FB model by the same count.",
-              "- One-sample calls pay for the chunk loop, one call per section and the state loads and stores "
-              "of every section in every call: the per-sample control path should call process() once per sample "
-              "or per block of up to 4 samples and budget these figures, not the block figures.",
+              "- Blocks shorter than 4 samples (the per-sample control path) run sample by sample through all "
+              "sections in one function, same arithmetic, states read and written in the instance: a one-sample "
+              "call pays for the state traffic of every section and the call itself, so the control path should "
+              "budget the one-sample figures, not the block figures.",
               f"- float32: worst sweep {worst_float:.1f} dB (target 75 dB); the delta-form feedback coefficients "
               "(c1 = -a1 - 2, c2 = 1 - a2) keep float32's relative precision on the poles' distance from z = 1.",
               "- CMSIS-DSP on this generator's sections against CMSIS-DSP on zpk2sos sections: the float32 DF2T kernel "
