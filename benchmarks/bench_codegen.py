@@ -40,7 +40,7 @@ import scipy.signal
 
 from codegen.api import generate_firmware
 from codegen.build import build_host
-from codegen.cmsis import design_cmsis, q31_kernel, q31x64_kernel
+from codegen.cmsis import KERNEL_FUNCTIONS, design_cmsis, q31_kernel, q31x64_kernel
 from codegen.plan import plan_firmware
 from codegen.qemu_cost import (
     M4_CFLAGS,
@@ -245,6 +245,41 @@ int main(void)
 """
 
 
+_CMSIS_TARGET_DRIVER = r"""
+#include <stddef.h>
+#include <stdint.h>
+#include "board_io.h"
+#include "cost_mark.h"
+#include "NAME_filter.h"
+static int16_t xq[LONG], yq[LONG];
+int main(void)
+{
+    NAME_q15_state sq;
+    uint32_t seed = 12345u;
+    size_t i;
+    for (i = 0; i < LONG; ++i) {
+        seed = seed * 1664525u + 1013904223u;
+        xq[i] = (int16_t)(((int32_t)(seed >> 16) - 32768) / 4);
+    }
+    NAME_q15_init(&sq);
+    cost_mark();
+    NAME_q15_process(&sq, xq, yq, SHORT);
+    cost_mark();
+    NAME_q15_process(&sq, xq, yq, LONG);
+    cost_mark();
+    for (i = 0; i < CALLS; ++i) {
+        NAME_q15_process(&sq, xq + i, yq + i, 1u);
+    }
+    cost_mark();
+    NAME_q15_reset(&sq);
+    NAME_q15_process(&sq, xq, yq, LONG);
+    board_io_write("in.raw", xq, sizeof xq);
+    board_io_write("out.raw", yq, sizeof yq);
+    return 0;
+}
+"""
+
+
 def _defines(**values) -> str:
     return "".join(f"#define {k} {v}\n" for k, v in values.items())
 
@@ -292,6 +327,28 @@ def measure_cmsis(path: str, workdir: Path) -> dict:
     return result
 
 
+def measure_cmsis_target(path: str, workdir: Path) -> dict:
+    """Emulated instructions per sample of the cmsis target's generated Q15 C (kernel chosen at --min-snr 80),
+    linked with the comparison kernels behind CMSIS-DSP's API (``benchmarks/arm_math.h``)."""
+    model = appendix_a_model(path)
+    plan = plan_firmware(model, target="cmsis", variant="q15")
+    gen = workdir / f"{path}_cmsis_target"
+    generate_firmware(model, gen, target="cmsis", variant="q15")
+    driver = gen / "driver.c"
+    driver.write_text(_defines(SHORT=SHORT, LONG=LONG, CALLS=ONE_SAMPLE_CALLS)
+                      + _CMSIS_TARGET_DRIVER.replace("NAME", path))
+    elf = build_m4_elf([driver, gen / f"{path}_filter.c", HERE / "cmsis_df1_kernels.c"], gen / "build",
+                       include_dirs=[gen, HERE])
+    counts = count_regions(elf)
+    x = np.fromfile(elf.parent / "in.raw", np.int16)
+    variant = plan.spec.variants["q15"]
+    if not np.array_equal(np.fromfile(elf.parent / "out.raw", np.int16), variant.reference(plan.cmsis, x)):
+        raise RuntimeError(f"{path}: the cmsis target's C on the emulator differs from its Python reference")
+    q15 = per_sample_cost(counts, SHORT, LONG, 0)
+    return {"kernel": plan.cmsis.kernel, "stages": len(plan.cascade.sections), "q15": q15,
+            "q15_one_sample": counts.regions[2] / ONE_SAMPLE_CALLS}
+
+
 def measure_sizes(path: str, workdir: Path) -> dict:
     """Code/data size (bytes) of each variant's filter object for the Cortex-M4F."""
     result = {}
@@ -319,7 +376,7 @@ def _machine() -> str:
     return f"{os.cpu_count()} CPUs (`nproc`), {cpu}, {platform.system()} {platform.machine()}, Python {platform.python_version()}"
 
 
-def render(snr: dict, generated: dict, cmsis: dict, sizes: dict, seconds: float) -> str:
+def render(snr: dict, generated: dict, cmsis: dict, cmsis_target: dict, sizes: dict, seconds: float) -> str:
     today = datetime.date.today().isoformat()
     lines = [SECTION_TITLE, "",
              f"Measured {today} on {_machine()} (2 cores, 24 GiB, shared with other work while measuring: "
@@ -378,6 +435,15 @@ def render(snr: dict, generated: dict, cmsis: dict, sizes: dict, seconds: float)
                      f"{c['unrolled_constant']:.1f} | {c['plain_constant']:.1f} | {c['32x64_runtime']:.1f} | "
                      f"{per / c['unrolled_runtime']:.2f}x, {per / c['unrolled_constant']:.2f}x | "
                      f"{two_pole / c['unrolled_runtime']:.2f}x, {two_pole / c['unrolled_constant']:.2f}x |")
+    lines += ["", "`--target cmsis`, Q15 variant, whole filter (its generated C with the delay line and the Q15 <-> Q31 "
+              "conversions, the kernel `--min-snr 80` chooses, run through the same comparison kernels behind "
+              "CMSIS-DSP's API, `benchmarks/arm_math.h`; output checked bit for bit against the target's Python "
+              "reference):", "",
+              "| model | kernel | filter / sample | per section | one-sample call | generated generic q15 filter / sample |",
+              "|---|---|---|---|---|---|"]
+    for path, c in cmsis_target.items():
+        lines.append(f"| {path.upper()} | {KERNEL_FUNCTIONS[c['kernel']]} | {c['q15']:.1f} | "
+                     f"{c['q15'] / c['stages']:.1f} | {c['q15_one_sample']:.1f} | {generated[path]['q15']:.1f} |")
     lines += ["", "### Cortex-M4F size of one variant's filter object (`arm-none-eabi-size`, bytes)", "",
               "| model | variant | text | data | bss |", "|---|---|---|---|---|"]
     for path, r in sizes.items():
@@ -465,8 +531,9 @@ def main(argv=None) -> int:
         snr = {p: measure_snr(p, args.seconds, work) for p in ("fb", "ff")}
         generated = {p: measure_generated(p, work) for p in ("fb", "ff")}
         cmsis = {p: measure_cmsis(p, work) for p in ("fb", "ff")}
+        cmsis_target = {p: measure_cmsis_target(p, work) for p in ("fb", "ff")}
         sizes = {p: measure_sizes(p, work) for p in ("fb", "ff")}
-    section = render(snr, generated, cmsis, sizes, args.seconds)
+    section = render(snr, generated, cmsis, cmsis_target, sizes, args.seconds)
     print(section)
     if args.write:
         write_section(args.write, section)

@@ -22,6 +22,7 @@
  */
 #include <stddef.h>
 #include <stdint.h>
+#include "arm_math.h"
 #include "cmsis_df1_kernels.h"
 
 void df1_q31_plain(const df1_q31_state *s, const int32_t *src, int32_t *dst, uint32_t n)
@@ -167,4 +168,47 @@ void df1_32x64_q31(const df1_32x64_q31_state *s, const int32_t *src, int32_t *ds
         coeffs += 5;
         src = dst;
     }
+}
+
+/* The CMSIS-DSP API of the two Q31 kernels (arm_math.h here), so that the cmsis target's generated
+ * C runs on the emulator: the documented init (states zeroed) and process calls, the process call
+ * running the 4x unrolled algorithm as the library does on Cortex-M4. */
+void arm_biquad_cascade_df1_init_q31(arm_biquad_casd_df1_inst_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                     q31_t *pState, int8_t postShift)
+{
+    uint32_t k;
+    S->numStages = numStages;
+    S->pCoeffs = pCoeffs;
+    S->pState = pState;
+    S->postShift = (uint8_t)postShift;
+    for (k = 0; k < 4u * numStages; ++k) {
+        pState[k] = 0;
+    }
+}
+
+void arm_biquad_cascade_df1_q31(const arm_biquad_casd_df1_inst_q31 *S, const q31_t *pSrc, q31_t *pDst,
+                                uint32_t blockSize)
+{
+    const df1_q31_state s = {S->numStages, S->pState, S->pCoeffs, S->postShift};
+    df1_q31_unrolled(&s, pSrc, pDst, blockSize);
+}
+
+void arm_biquad_cas_df1_32x64_init_q31(arm_biquad_cas_df1_32x64_ins_q31 *S, uint8_t numStages, const q31_t *pCoeffs,
+                                       q63_t *pState, uint8_t postShift)
+{
+    uint32_t k;
+    S->numStages = numStages;
+    S->pCoeffs = pCoeffs;
+    S->pState = pState;
+    S->postShift = postShift;
+    for (k = 0; k < 4u * numStages; ++k) {
+        pState[k] = 0;
+    }
+}
+
+void arm_biquad_cas_df1_32x64_q31(const arm_biquad_cas_df1_32x64_ins_q31 *S, const q31_t *pSrc, q31_t *pDst,
+                                  uint32_t blockSize)
+{
+    const df1_32x64_q31_state s = {S->numStages, S->pState, S->pCoeffs, S->postShift};
+    df1_32x64_q31(&s, pSrc, pDst, blockSize);
 }
