@@ -243,12 +243,15 @@ def _cmsis_context(designs: dict) -> dict:
     cmsis = designs["cmsis"]
     return {
         "kernel": cmsis.kernel,
+        "kernel_is_q15": cmsis.kernel == "q15",
+        "kernel_is_q31": cmsis.kernel == "q31",
         "kernel_function": KERNEL_FUNCTIONS[cmsis.kernel],
         "q15_post_shift": cmsis.q15_post_shift,
         # The Q15 kernel's rows carry a zero after b0 (CMSIS-DSP's layout for its dual 16-bit MACs).
         "cmsis_q15": [[f"(q15_t){v}" for v in (row[0], 0, *row[1:])] for row in cmsis.q15_coefficients],
         "post_shift": cmsis.post_shift,
         "output_shift": cmsis.output_shift,
+        "output_scale": str(2**cmsis.output_shift),
         "cmsis_q31": [[f"(q31_t){v}" if v != -(2**31) else "(q31_t)(-2147483647 - 1)" for v in row]
                       for row in cmsis.q31_coefficients],
         "cmsis_f32": [[float_literal(v) for v in row] for row in cmsis.f32_coefficients],
