@@ -16,16 +16,19 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
+from . import lti
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .latency import LatencyEstimate, compensate_delay, estimate_latency
+from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay
 from .model import PATHS, Model
-from .order_search import START_GAMMAS, search_orders, sweep_rms
+from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
 from .output_error import block_data, refine_output_error
 from .recordings import Recording, RecordingFile, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
@@ -94,6 +97,13 @@ def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: st
     A noise recording opened with ``sysid.recordings.open_recording`` is read in blocks:
     memory stays bounded whatever its length (the sweeps are held in memory).
     """
+    # The matrices are at most a few thousand by sixty: BLAS threads only add overhead,
+    # and on a loaded machine they spin (a QR took 0.3 s of CPU with two threads, 5 ms with one).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _identify(noise, sweeps, path, options, progress)
+
+
+def _identify(noise, sweeps, path, options, progress) -> Identification:
     options = options or IdentificationOptions()
     if path not in PATHS:
         raise IdentificationError(f"path must be one of {', '.join(PATHS)}; found {path!r}")
@@ -137,7 +147,9 @@ def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: st
         "seed_choice": {"gamma": chosen.gamma, "order": chosen.order},
         "noise_floor": floor,
     }
-    seed_model = Model(path=path, fs=fs, A=chosen.fit.A, B=chosen.fit.B, C=chosen.fit.C, D=chosen.fit.D, delay=delay,
+    # Balanced before it becomes a Model (the subspace fit's coordinates are arbitrary).
+    A, B, C, D = lti.balanced_realisation(chosen.fit.A, chosen.fit.B, chosen.fit.C, chosen.fit.D)
+    seed_model = Model(path=path, fs=fs, A=A, B=B, C=C, D=D, delay=delay,
                        identification=dict(provenance, method="seed grid (smoothed FRF + subspace)"))
     seed_rms = simulated_rms(seed_model, sweeps, options.validation_band)
     provenance["seed_choice"]["rms"] = seed_rms
@@ -145,9 +157,15 @@ def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: st
     result_model, refined_rms, scan = seed_model, None, []
     if options.refine:
         t0 = time.perf_counter()
-        result_model, refined_rms, scan = _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options,
-                                                  provenance, progress)
+        result_model, refined_rms, scan, extra = _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor,
+                                                         options, provenance, progress)
         seconds["refinement"] = time.perf_counter() - t0
+        if extra is not None and refined_rms < seed_rms:
+            # The model moved ``extra`` samples of its core into the delay line (latency.refine_delay).
+            body = compensate_delay(body, extra)
+            delay += extra
+            latency = dataclasses.replace(latency, samples=delay, refined_by=extra)
+            result_model.identification["latency"] = latency.to_dict()
         if refined_rms >= seed_rms:
             # Keep the seed's choice, but say what the refinement tried and why it was dropped.
             seed_model.identification["refinement"] = dict(result_model.identification["refinement"], rms=refined_rms,
@@ -158,7 +176,7 @@ def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: st
     result_model.identification.update({
         "gamma": start_gamma,
         "order": result_model.order,
-        "delay": delay,
+        "delay": result_model.delay,
         "rms": final_rms,
         "noise_floor": floor,
         "refined": result_model is not seed_model,
@@ -200,6 +218,22 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     # The lowest order within min_gain of the best validation rms.
     best_rms = min(c.rms for c in candidates)
     pick = next(c for c in candidates if c.rms <= best_rms * (1 + options.min_gain))
+    extra = None
+    if options.latency:
+        # The onset errs short by the smoothing kernel's lead; the picked core's poles say by how much.
+        extra, _ = refine_delay(pick.A, body, options.band, options.scan_seconds, feedthrough=options.feedthrough)
+        if extra:
+            longer = compensate_delay(body, extra)
+            longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
+            # The same poles behind the longer delay: refit on the scan block (numerator and poles).
+            fit = refine_output_error(pick.A, pick.B, pick.C, pick.D, block_data(longer, options.band, options.scan_seconds),
+                                      feedthrough=options.feedthrough, max_iterations=20)
+            rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, longer_sweeps)
+            if rms <= pick.rms * (1 + options.min_gain):
+                body, delay, sweep_spectra = longer, delay + extra, longer_sweeps
+                pick = OrderCandidate(pick.order, pick.start, rms, fit.A, fit.B, fit.C, fit.D, pick.reflected)
+            else:  # the sweeps disagree: keep the onset's delay
+                extra = 0
     block = block_data(body, options.band, options.refine_seconds)
     oe = refine_output_error(pick.A, pick.B, pick.C, pick.D, block, feedthrough=options.feedthrough, max_iterations=60)
     A, B, C, D = oe.A, oe.B, oe.C, oe.D
@@ -213,4 +247,4 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
                                       refinement={"start_gamma": gamma, "start": pick.start, "order": pick.order,
                                                   "reflected_poles": pick.reflected,
                                                   "block_seconds": block.length / body.fs, "order_scan": scan}))
-    return model, simulated_rms(model, sweeps, options.validation_band), scan
+    return model, simulated_rms(model, sweeps, options.validation_band), scan, extra

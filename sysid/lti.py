@@ -98,9 +98,13 @@ def frequency_response(A, B, C, D, z: np.ndarray) -> np.ndarray:
     b = Q.T @ B[:, 0]
     c = C[0] @ Q
     n = A.shape[0]
-    out = np.empty(z.size, dtype=complex)
-    for k, zk in enumerate(z.reshape(-1)):
-        out[k] = c @ np.linalg.solve(zk * np.eye(n) - H, b) + D
+    flat = z.reshape(-1)
+    out = np.empty(flat.size, dtype=complex)
+    # Batched solves (one LAPACK call per chunk of frequencies, bounded memory).
+    for start in range(0, flat.size, 2048):
+        zk = flat[start:start + 2048]
+        pencil = zk[:, None, None] * np.eye(n) - H
+        out[start:start + zk.size] = np.linalg.solve(pencil, np.broadcast_to(b, (zk.size, n))[..., None])[..., 0] @ c + D
     return out.reshape(z.shape)
 
 

