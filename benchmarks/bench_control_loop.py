@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from anc import DesignOptions, design  # noqa: E402
+from anc.controller import Controller  # noqa: E402
 from anc.closed_loop import measured_attenuation, run_closed_loop  # noqa: E402
 from anc.disturbance import default_disturbance, synthesize  # noqa: E402
 from anc.prediction import band_centres  # noqa: E402
@@ -51,10 +52,12 @@ static void frames(unsigned n)
 {
     unsigned k;
     for (k = 0; k < n; ++k) {
-        unsigned h = k & 1u;
-        ctl.ear[h][0] = (int16_t)((k * 2654435761u) >> 20);
-        ctl.chin[h][0] = (int16_t)((k * 40503u) >> 4);
-        anc_control_dma_done(&ctl, h);
+        unsigned h = (k / ANC_CONTROL_BLOCK) & 1u, slot = k % ANC_CONTROL_BLOCK;
+        ctl.ear[h][slot] = (int16_t)((k * 2654435761u) >> 20);
+        ctl.chin[h][slot] = (int16_t)((k * 40503u) >> 4);
+        if (slot + 1u == ANC_CONTROL_BLOCK) {
+            anc_control_dma_done(&ctl, h);
+        }
     }
 }
 #define FILTER_RUN(filter, state_type)                    \\
@@ -115,6 +118,10 @@ def closed_loops(root: Path, seconds: float) -> dict:
     controller = design(s_true, p_true, options=DesignOptions(latency=2))
     design_s = time.process_time() - started
     generate_controller_firmware(controller, root / "ctl")
+    # The same filters with the latency of 4-frame blocks, for the cost of the block variant only.
+    data = controller.to_dict()
+    data["latency_samples"] = 8
+    generate_controller_firmware(Controller.from_dict(data), root / "ctl8")
     plan = plan_controller(controller)
     fs = controller.fs
     x, u = synthesize(default_disturbance(fs, p_true), int(seconds * fs), fs, 0)
@@ -157,14 +164,21 @@ def closed_loops(root: Path, seconds: float) -> dict:
 def instruction_counts(root: Path) -> dict:
     result = {}
     for variant, flags in (("q15", ()), ("float", ("-DANC_CONTROL_F32",))):
-        work = root / f"cost_{variant}"
-        work.mkdir(parents=True, exist_ok=True)
-        (work / "driver.c").write_text(DRIVER.replace("SHORT", str(SHORT)).replace("LONG", str(LONG)))
-        sources = [work / "driver.c", FIRMWARE / "anc_control.c", *sorted((root / "ctl").glob("ctl_*_filter.c"))]
-        elf = build_m4_elf(sources, work, include_dirs=(root / "ctl",), cflags=(*M4_CFLAGS, *flags))
-        counts = count_regions(elf)
-        names = ["control path (interrupt handler)", "ctl_s (internal model)", "ctl_q (Q)", "ctl_w (W)"]
-        result[variant] = {name: per_sample_cost(counts, SHORT, LONG, first=2 * i) for i, name in enumerate(names)}
+        for block, folder in ((1, "ctl"), (4, "ctl8")):
+            work = root / f"cost_{variant}_{block}"
+            work.mkdir(parents=True, exist_ok=True)
+            (work / "driver.c").write_text(DRIVER.replace("SHORT", str(SHORT)).replace("LONG", str(LONG)))
+            sources = [work / "driver.c", FIRMWARE / "anc_control.c", *sorted((root / folder).glob("ctl_*_filter.c"))]
+            elf = build_m4_elf(sources, work, include_dirs=(root / folder,),
+                               cflags=(*M4_CFLAGS, *flags, f"-DANC_CONTROL_BLOCK={block}u"))
+            counts = count_regions(elf)
+            if block == 1:
+                names = ["control path, per sample (latency 2)", "ctl_s (internal model), one sample per call",
+                         "ctl_q (Q), one sample per call", "ctl_w (W), one sample per call"]
+                result.setdefault(variant, {}).update(
+                    {name: per_sample_cost(counts, SHORT, LONG, first=2 * i) for i, name in enumerate(names)})
+            else:
+                result[variant]["control path, blocks of 4 frames (latency 8)"] = per_sample_cost(counts, SHORT, LONG)
     return result
 
 
