@@ -2,6 +2,9 @@
  * Board runtime of the helmet ANC: wires the generated FB and FF filters (names
  * "fb" and "ff", Q15 variant) into a double-buffered block audio callback.
  *
+ * This block path serves logging and identification; the control loop itself runs per sample
+ * in the codec interrupt (anc_control.h: latency 2 samples instead of 2 * ANC_BLOCK).
+ *
  * Timing: the codec DMA runs over two halves of each buffer. While half h is
  * being captured (chin and ear microphones) and played (speaker), the CPU works
  * on the other half. anc_dma_block_done() (from the DMA interrupt) marks a captured

@@ -332,3 +332,48 @@ def test_too_short_controller_latency_refused_at_compile_time(setup, tmp_path):
                              str(setup["root"] / "ctl2"), "-c", "-o", str(tmp_path / "out.o"),
                              str(FIRMWARE / "anc_control.c")], capture_output=True, text=True, check=False, timeout=120)
     assert result.returncode != 0 and "latency_samples is below" in result.stderr
+
+
+def test_closed_loop_clean_under_sanitizers(setup, tmp_path):
+    """The control path and the harness under AddressSanitizer and UndefinedBehaviorSanitizer
+    (gcc), on the miswired speaker: growth, rails, saturation and the mute all run."""
+    if not have("gcc"):
+        pytest.skip("gcc not installed")
+    folder = setup["root"] / "ctl2"
+    exe = tmp_path / "closed_loop_san"
+    sources = [FIRMWARE / "closed_loop.c", FIRMWARE / "board_io_host.c", FIRMWARE / "anc_control.c",
+               *sorted(folder.glob("ctl_*_filter.c"))]
+    build = subprocess.run(["gcc", *STRICT, "-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-g",
+                            "-I", str(FIRMWARE), "-I", str(folder), "-o", str(exe), *map(str, sources)],
+                           capture_output=True, text=True, check=False, timeout=180)
+    if build.returncode != 0 and "sanitizer" in build.stderr.lower() and "cannot find" in build.stderr.lower():
+        pytest.skip("gcc's sanitizer runtime is not installed")
+    assert build.returncode == 0, build.stderr
+    s = setup["s_true"]
+    flipped = Model(path="fb", fs=s.fs, A=s.A, B=s.B, C=-s.C, D=-s.D, delay=s.delay)
+    _write_inputs(tmp_path, flipped, setup["d"][:8000], setup["chin"][:8000])
+    result = subprocess.run([str(exe)], cwd=tmp_path, capture_output=True, text=True, check=False, timeout=120)
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+    assert np.fromfile(tmp_path / "status.u32", np.uint32)[1] == 1  # the limiter tripped once
+
+
+@pytest.mark.slow
+def test_converter_latency_inside_the_identified_path(tmp_path):
+    """Converters adding 3 samples (ANC_CONVERTER_LATENCY_SAMPLES): the true FB path and the model the
+    controller is designed on both carry them (identification measures through the same converters),
+    and the per-sample loop still equals its twin and the float64 design within 1 dB per band."""
+    s_true = appendix_a_model("fb")
+    s_true.delay = 3
+    p_true = appendix_a_model("ff")
+    controller = design(s_true, p_true, options=DesignOptions(latency=2))
+    generate_controller_firmware(controller, tmp_path / "ctl2")
+    fs = controller.fs
+    x, u = synthesize(default_disturbance(fs, p_true), int(SECONDS * fs), fs, 1)
+    d = p_true.simulate(x) + u
+    setup = {"root": tmp_path}
+    c_run = _run_host(setup, "loop", s_true, d, to_q15(x))
+    twin = board_loop(plan_controller(controller), s_true, d, to_q15(x), "q15")
+    _assert_same_run(c_run, twin)
+    achieved = np.array(measured_attenuation(d, twin.ear / 32768.0, fs))
+    design64 = np.array(measured_attenuation(d, run_closed_loop(controller, s_true, d, x).e, fs))
+    assert np.max(np.abs(achieved - design64)[CHECKED]) <= 1.0
