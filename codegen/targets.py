@@ -12,7 +12,11 @@ Cortex-M4 count of :mod:`codegen.qemu_cost`).
 
 Adding a kind of generated code means adding one Target (or Variant) here; the
 plan, rendering, verification and manifest code only ask the registry
-(:func:`get_target`). Registered:
+(:func:`get_target`). The controller filters (:mod:`codegen.controller`) are the
+generic target's variants under fixed names; filters that need templates or
+numbers of their own become a Target whose ``variants`` reuse ``FIXED_Q15`` and
+``FLOAT32`` (or new Variants) with its own ``templates``, ``context`` and ``formats``.
+Registered:
 
 ``generic``  plain C99: Q15 direct-form-I sections with error feedback
              (:mod:`codegen.fixedpoint`) and float32 delta-form sections
