@@ -323,6 +323,11 @@ def test_control_path_compiles_strict(setup, tmp_path, compiler, options):
                                  str(tmp_path / "out.o"), str(FIRMWARE / source)], capture_output=True, text=True,
                                 check=False, timeout=120)
         assert result.returncode == 0, result.stderr
+        if compiler.startswith("arm-") and source == "anc_control.c":
+            # No heap, no libm, no libgcc helpers per sample: only the generated filters are called.
+            undefined = subprocess.run(["arm-none-eabi-nm", "-u", str(tmp_path / "out.o")], capture_output=True,
+                                       text=True, check=True, timeout=60).stdout.split()
+            assert undefined and all(name.startswith("ctl_") for name in undefined[1::2]), undefined
 
 
 def test_too_short_controller_latency_refused_at_compile_time(setup, tmp_path):
