@@ -25,6 +25,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.signal
@@ -36,6 +37,9 @@ from . import __version__
 from .errors import CodegenError, OutputError
 from .plan import Plan, plan_firmware
 from .render import build_context, render_files, write_directory
+
+if TYPE_CHECKING:
+    from anc.controller import Controller
 
 __all__ = ["CONTROL_BLOCK_MAX", "FILTER_NAMES", "ControllerPlan", "format_headroom_table",
            "generate_controller_firmware", "headroom", "plan_controller"]
@@ -52,7 +56,7 @@ _LABELS = {"model": "internal model S", "fb": "controller Q", "ff": "controller 
 class ControllerPlan:
     """The plans of the controller's filters (keys 'model', 'fb', 'ff'), its latency and headroom."""
 
-    controller: object
+    controller: "Controller"
     plans: dict[str, Plan]
     latency_samples: int
     controller_file: str | None = None
@@ -204,7 +208,9 @@ def generate_controller_firmware(controller, outdir, *, variant: str = "both", m
         "name": "controller",
         "kind": "controller",
         "controller": {"file": plan.controller_file, "sha256": controller_hash, "fs": plan.controller.fs,
-                       "latency_samples": plan.latency_samples},
+                       "latency_samples": plan.latency_samples,
+                       # The control path's processing latency is 2 x ANC_CONTROL_BLOCK (firmware/anc_control.h).
+                       "largest_control_block": min(CONTROL_BLOCK_MAX, plan.latency_samples // 2)},
         "filters": filters,
         "headroom": plan.headroom,
         "verification": None,

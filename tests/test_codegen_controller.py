@@ -65,6 +65,7 @@ def test_generated_folder(generated, controller):
     assert "#define CTL_HAS_Q 1\n" in config and "#define CTL_HAS_W 1\n" in config
     manifest = json.loads((generated.outdir / "manifest.json").read_text())
     assert manifest["kind"] == "controller" and manifest["controller"]["latency_samples"] == 2
+    assert manifest["controller"]["largest_control_block"] == 1
     assert set(manifest["filters"]) == set(FILTER_NAMES.values())
     # Regeneration into our own folder is allowed and gives the same files.
     again = generate_controller_firmware(controller, generated.outdir)
