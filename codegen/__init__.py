@@ -14,6 +14,8 @@ The pipeline (design reference, "Firmware generation"):
 ``render``      jinja2 templates (``codegen.templates``) and atomic output directories;
 ``build``       cffi host builds cached by source hash; ``verify`` the C against the references;
 ``qemu_cost``   instructions per sample of the real Cortex-M4 ELF, counted on QEMU;
+``controller``  a controller JSON (``anc``) -> C of its S, Q and W for the board's control path;
+``control_loop`` the control path's sample-by-sample Python twin (fixed point and float32);
 ``api`` the Python front end (``generate_firmware``); the command line is ``helmet_anc``.
 """
 
