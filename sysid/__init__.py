@@ -14,7 +14,8 @@ from .grid import GridResult, grid_search
 from .identify import Identification, IdentificationOptions, identify
 from .model import Model
 from .plants import appendix_a_model
-from .recordings import Recording, RecordingWarning, check_same_rate, load_recording, recording_from_arrays
+from .recordings import (Recording, RecordingFile, RecordingWarning, check_same_rate, load_recording, open_recording,
+                         recording_from_arrays)
 from .simulate import Session, SessionSpec, simulate_session, write_session
 from .spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
 from .subspace import SubspaceDecomposition, subspace_fit
@@ -30,7 +31,8 @@ __version__ = "0.1.0"
 __all__ = [
     "HelmetAncError", "IdentificationError", "ModelError", "RecordingError", "RecordingWarning",
     "GridResult", "grid_search", "Identification", "IdentificationOptions", "identify", "Model",
-    "appendix_a_model", "Recording", "check_same_rate", "load_recording", "recording_from_arrays",
+    "appendix_a_model", "Recording", "RecordingFile", "check_same_rate", "load_recording", "open_recording",
+    "recording_from_arrays",
     "Session", "SessionSpec", "simulate_session", "write_session", "estimate_spectra", "parzen_lag_window",
     "response", "smooth_spectra", "smoothed_response", "SubspaceDecomposition", "subspace_fit",
     "noise_floor", "simulated_rms", "UncertaintyBand", "frequency_response_band", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
