@@ -4,7 +4,8 @@ Columns (``ROW_FIELDS``): session, helmet, head, condition, path; status (ok or
 failed) and reason; order, delay_samples; rms, noise_floor (full-scale units, in the
 validation band) and their ratio; seed_rms (the seed grid's choice); refined,
 refine_steps, findings (the effects ``refine --auto`` tried, ``;``-separated);
-data_quality (clipping, DC offsets); seconds per stage; model_file (relative to
+data_quality (clipping, DC offsets); seconds per stage (wall clock) and seconds_cpu (the
+worker process's CPU time for the session); model_file (relative to
 OUTDIR); input_hash; resumed (taken from an earlier run).
 """
 

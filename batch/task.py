@@ -37,7 +37,7 @@ TASK_VERSION = 1
 
 ROW_FIELDS = ("session", "helmet", "head", "condition", "path", "status", "reason", "order", "delay_samples", "rms",
               "noise_floor", "rms_over_floor", "seed_rms", "refined", "refine_steps", "findings", "data_quality",
-              "seconds_load", "seconds_identify", "seconds_refine", "seconds_total", "model_file", "input_hash", "resumed")
+              "seconds_load", "seconds_identify", "seconds_refine", "seconds_total", "seconds_cpu", "model_file", "input_hash", "resumed")
 
 
 _IDENTITY = ("session", "helmet", "head", "condition", "path")
@@ -118,7 +118,7 @@ def run_session(task: SessionTask) -> dict:
     if done is not None:
         return done
     row = base_row(entry, task.digest)
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     try:
         # One BLAS thread per task: the pool's processes are the parallelism, and results do
         # not depend on how many threads a worker happens to have.
@@ -136,6 +136,8 @@ def run_session(task: SessionTask) -> dict:
         row.update(status="failed", reason=f"{type(exc).__name__}: {message}" if message else type(exc).__name__)
     row.pop("_model", None)
     row["seconds_total"] = time.perf_counter() - start
+    # CPU seconds of the worker process: the task's cost whatever else the machine is doing.
+    row["seconds_cpu"] = time.process_time() - start_cpu
     layout.result(entry.name).parent.mkdir(parents=True, exist_ok=True)
     record = {"format": RESULT_FORMAT, "input_hash": task.digest, "row": row}
     if row["status"] == "ok":

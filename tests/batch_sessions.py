@@ -9,7 +9,7 @@ SHORT_SESSION = dict(noise_duration=6.0, sweep_duration=2.0, sweep_silence=0.2)
 BATCH_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 60)), orders=tuple(range(1, 13)), refine_seconds=3.0)
 
 # Columns that depend on the clock or on the run, not on the data.
-RUN_COLUMNS = ("seconds_load", "seconds_identify", "seconds_refine", "seconds_total", "resumed")
+RUN_COLUMNS = ("seconds_load", "seconds_identify", "seconds_refine", "seconds_total", "seconds_cpu", "resumed")
 
 
 def data_columns(row: dict) -> dict:

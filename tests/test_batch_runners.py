@@ -46,6 +46,7 @@ class TestLocalPool:
         assert sorted(r["session"] for r in rows) == sorted(f"H0_head{k}_fb" for k in range(4))
         assert [r["status"] for r in rows] == ["ok"] * 4, [r["reason"] for r in rows]
         assert all(r["rms"] > 0 and r["noise_floor"] > 0 and r["order"] >= 1 for r in rows)
+        assert all(0 < r["seconds_cpu"] for r in rows)
 
     def test_outputs_carry_the_input_hash(self, local_run):
         layout = local_run.layout
