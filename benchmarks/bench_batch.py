@@ -163,6 +163,10 @@ def main() -> None:
           f"{statistics.mean(cpu_task):.2f} s, largest {max(cpu_task):.2f} s; wall median "
           f"{statistics.median(wall_task):.2f} s. Runner overhead per task (empty tasks): process pool "
           f"{1000 * pool_overhead:.1f} ms (including the start of 2 interpreters), Dask {1000 * dask[4]:.1f} ms.\n")
+    reasons = statistics.multimode([r["reason"] for r in one[0] if r["status"] != "ok"]) if failed else []
+    if failed:
+        print(f"Failed sessions and why (most frequent reason): {', '.join(r['session'] for r in one[0] if r['status'] != 'ok')}: "
+              f"{reasons[0]}\n")
     per_task = statistics.mean(cpu_task)
     hours = 8000 * (per_task + dask[4]) / 32 / 3600
     print(f"On paper, 8000 such sessions on 32 Dask workers, one core each: 8000 x ({per_task:.2f} s + "
