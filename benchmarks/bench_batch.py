@@ -125,6 +125,9 @@ def main() -> None:
     parser.add_argument("--sweep", type=float, default=5.0, help="sweep length (s)")
     parser.add_argument("--fast", action="store_true",
                         help="gamma step 100, orders 1..8, 0.5 s scan and 2 s refinement blocks")
+    parser.add_argument("--default-sample", type=int, default=0, metavar="K",
+                        help="also identify every (sessions/K)-th session with the default options on 1 worker, "
+                             "for the per-task cost of the paper estimate")
     args = parser.parse_args()
     options = FAST_OPTIONS if args.fast else IdentificationOptions()
     n = args.helmets * args.heads
@@ -141,6 +144,13 @@ def main() -> None:
         dask = _dask(root, Path(tmp) / "dask", options)
         _say(f"Dask: {dask[1]:.1f} s wall; empty tasks through a process pool")
         pool_overhead = _pool_overhead(n, 2)
+        sample = []
+        if args.default_sample:
+            from batch import read_sessions
+
+            entries = read_sessions(root)[::max(1, n // args.default_sample)][:args.default_sample]
+            _say(f"{len(entries)} sessions with the default options, 1 worker")
+            sample = _local(entries, Path(tmp) / "sample", 1, IdentificationOptions())[0]
         load1 = os.getloadavg()[0]
         same = _same([one[0], two[0], dask[0]], [Path(tmp) / "one", Path(tmp) / "two", Path(tmp) / "dask"])
     cpu_task = [r["seconds_cpu"] for r in one[0] if r.get("seconds_cpu") is not None]
@@ -171,6 +181,13 @@ def main() -> None:
     hours = 8000 * (per_task + dask[4]) / 32 / 3600
     print(f"On paper, 8000 such sessions on 32 Dask workers, one core each: 8000 x ({per_task:.2f} s + "
           f"{1000 * dask[4]:.1f} ms) / 32 = {hours:.2f} h.")
+    default_cpu = [r["seconds_cpu"] for r in sample if r.get("seconds_cpu") is not None]
+    if default_cpu:
+        hours = 8000 * (statistics.mean(default_cpu) + dask[4]) / 32 / 3600
+        print(f"\nDefault options on {len(default_cpu)} of the same sessions (1 worker): CPU per task mean "
+              f"{statistics.mean(default_cpu):.2f} s, median {statistics.median(default_cpu):.2f} s, largest "
+              f"{max(default_cpu):.2f} s; failed {sum(r['status'] != 'ok' for r in sample)}. "
+              f"8000 such sessions on 32 workers: {hours:.2f} h.")
 
 
 if __name__ == "__main__":
