@@ -129,6 +129,8 @@ def model_uncertainty(model: Model) -> Uncertainty:
     if stated:
         f = np.asarray(stated["frequencies_hz"], dtype=float)
         r = np.asarray(stated["relative_95"], dtype=float)
+        # A non-finite entry (a failed covariance) states nothing: the bound where nothing is known.
+        r = np.where(np.isfinite(r), r, LINEARISATION_LIMIT)
         order = np.argsort(f)
         return _with_peak(model, Uncertainty(f[order], np.maximum(r[order], 0.0), (float(f.min()), float(f.max())),
                                              "the model's uncertainty field"))

@@ -47,3 +47,13 @@ def test_seed_fb_path_below_the_band_lies_inside_the_bound():
     f = np.geomspace(0.2, 19.0, 200)
     magnitude = np.abs(s.frequency_response(f))
     assert np.all(magnitude <= (u.at(f) - 1.0) * magnitude + 1e-12)
+
+
+def test_non_finite_band_entries_state_nothing():
+    """A NaN in the band (a failed covariance) is treated as 'nothing known' there, never as 0 %."""
+    s = appendix_a_model("fb")
+    model = Model.from_dict({**s.to_dict(), "uncertainty": {"frequencies_hz": [20.0, 100.0, 1000.0],
+                                                             "relative_95": [0.1, 0.1, 0.1]}})
+    model.uncertainty["relative_95"] = [0.1, float("nan"), 0.1]
+    u = model_uncertainty(model)
+    assert u.unknown([100.0])[0] and u.at([100.0])[0] >= 1.0 and np.isfinite(u.at([100.0])[0])
