@@ -9,6 +9,12 @@ taken, stop reasons, and the CPU and wall time of diagnose and refine --auto; on
 clean sessions the false-alarm rate (any significant finding). Prints Markdown.
 
     python benchmarks/bench_diagnose.py [--sessions 2] [--thesis] [--kinds delay,clipping] [--clean 10]
+
+``--timing N``: only the time of ``diagnose`` and ``refine --auto`` as the command runs them
+(its default refit grid, ``sysid.refine.REFIT_OPTIONS``) on N thesis-length sessions (20 s noise,
+5 s sweeps) of random helmets with one to three hidden effects, the model identified on each session;
+prints the median and worst CPU and wall time (targets: refine --auto median <= 30 s, worst <= 60 s;
+diagnose <= 2 s).
 """
 
 from __future__ import annotations
@@ -55,6 +61,41 @@ def run_session(path: str, seed: int, effects: list[str], changes: dict) -> dict
     return result
 
 
+def timing(count: int) -> None:
+    """CPU and wall time of diagnose and refine --auto (default refit grid) on thesis-length sessions."""
+    rows, diag, auto = [], [], []
+    for k in range(count):
+        rng = np.random.default_rng([k, 11])
+        path = ("fb", "ff")[k % 2]
+        case = list(rng.choice(KINDS[:-1], size=1 + k % 3, replace=False))
+        drawn = [random_effect(kind, rng)[0] for kind in case]
+        try:
+            session = random_session(300 + k, path, effects=drawn)
+            model = identify(session.noise, session.sweeps, path, OPTIONS).model
+        except HelmetAncError as exc:
+            print(f"timing {k}: identification failed: {exc}", file=sys.stderr, flush=True)
+            continue
+        c0, t0 = time.process_time(), time.perf_counter()
+        findings = diagnose(model, session.noise, session.sweeps)
+        diag.append((time.process_time() - c0, time.perf_counter() - t0))
+        c0, t0 = time.process_time(), time.perf_counter()
+        result = refine_auto(model, session.noise, session.sweeps)
+        auto.append((time.process_time() - c0, time.perf_counter() - t0))
+        rows.append(f"| {path} {300 + k} | {', '.join(drawn)} | {findings.comparison.ratio:.2f} | "
+                    f"{result.after.ratio:.2f} | {len(result.steps)} | {result.stop_reason} | "
+                    f"{diag[-1][0]:.2f} / {diag[-1][1]:.2f} | {auto[-1][0]:.1f} / {auto[-1][1]:.1f} |")
+        print(rows[-1], file=sys.stderr, flush=True)
+    print("| session | hidden effects | rms/floor before | after refine --auto | steps | stop reason | "
+          "diagnose CPU / wall (s) | refine --auto CPU / wall (s) |")
+    print("|---|---|---|---|---|---|---|---|")
+    print("\n".join(rows))
+    if auto:
+        cpu, wall = np.array([a[0] for a in auto]), np.array([a[1] for a in auto])
+        print(f"\nrefine --auto CPU median {np.median(cpu):.1f} s, worst {cpu.max():.1f} s; wall median "
+              f"{np.median(wall):.1f} s, worst {wall.max():.1f} s; diagnose CPU median "
+              f"{np.median([d[0] for d in diag]):.2f} s, worst {max(d[0] for d in diag):.2f} s ({len(auto)} sessions)")
+
+
 def error_of(kind, value, truth):
     value = value[0] if isinstance(value, list) else value
     return abs(value / truth - 1) * 100 if kind in RELATIVE else abs(value - truth)
@@ -66,7 +107,11 @@ def main() -> None:
     parser.add_argument("--clean", type=int, default=10, help="clean sessions per path")
     parser.add_argument("--thesis", action="store_true", help="20 s noise, 5 s sweeps instead of 8 s / 2 s")
     parser.add_argument("--kinds", help="comma-separated effects (default: all, then the combinations)")
+    parser.add_argument("--timing", type=int, help="only time diagnose and refine --auto on this many thesis-length sessions")
     args = parser.parse_args()
+    if args.timing:
+        timing(args.timing)
+        return
     changes = {} if args.thesis else SHORT
     cases = [(k,) for k in (args.kinds.split(",") if args.kinds else KINDS)]
     cases += [] if args.kinds else COMBINATIONS

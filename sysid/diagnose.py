@@ -1,7 +1,9 @@
 """Diagnose what a model misses: ranked findings, each naming a physical effect (design.md).
 
 ``diagnose(model, noise, sweeps)`` compares the model with the sweeps
-(``sysid.compare``) and runs one detector per effect (``sysid.findings``):
+(``sysid.compare``) and runs the detector of every effect in the registry
+(``sysid.effects``; the detectors live in ``sysid.findings``), each after the
+detectors of the effects it declares it needs. The built-in effects:
 
 - data quality, straight from the recordings: ``dc-offset``, ``clipping``;
 - the plant: ``delay`` (fixed-pole delay scan), ``input-nonlinearity`` (residual
@@ -14,44 +16,50 @@
   one more mode removes, and in any case error above twice the floor that nothing
   named explains (with the bands and the order it suggests).
 
-Findings are sorted significant first, then by score; on data with no missing
-effect nothing is significant. A delay and a series factor can both explain a
-phase lag; only the one that explains the sweeps better stays significant.
+Findings (``Finding`` records; ``Diagnosis.to_dicts`` gives the JSON of the
+``helmet-anc/diagnosis@1`` contract) are sorted significant first, then by score;
+on data with no missing effect nothing is significant. A delay and a series factor
+can both explain a phase lag; only the one that explains the sweeps better stays
+significant. A long missing delay (excess phase above ``LEADING_PHASE_DEG`` at the
+top of the validation band) ranks ahead of the findings whose detectors need it
+(the input polynomial is judged against the model's linear prediction, which the
+delay's misfit spoils), so ``refine --auto`` adds it first.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
-
+from . import effects as registry
 from .compare import compare
 from .corrections import corrected
 from .errors import IdentificationError
-from .findings import DiagnosisContext
-from .findings.data_quality import clipping_finding, dc_offset_finding
-from .findings.delay import delay_finding
-from .findings.dynamics import dynamics_findings
-from .findings.disturbance import disturbance_finding
-from .findings.input_noise import input_noise_finding
-from .findings.nonlinearity import nonlinearity_finding
-from .findings.under_modelled import under_modelled_finding
-from .findings.variation import clock_drift_finding, time_variation_finding
+from .findings import DiagnosisContext, Finding
 from .model import Model
 from .recordings import Recording, check_same_rate
 from .thresholds import TRANSIENT_S
 
-__all__ = ["diagnose", "Diagnosis", "format_findings", "DETECTORS"]
+__all__ = ["diagnose", "Diagnosis", "Finding", "format_findings", "DETECTORS"]
+
+class _Detectors(Sequence):
+    """The registry's detectors in the order they run (``sysid.effects.detector_order``), read live."""
+
+    def __getitem__(self, index):
+        return registry.detector_order()[index]
+
+    def __len__(self):
+        return len(registry.detector_order())
+
 
 # Each detector returns one finding or a list of them. The series factors come first: the delay
 # settles a tie with them, and the later detectors see what a significant factor leaves;
 # under-modelled is asked last, when nothing named explains the error.
-DETECTORS = (dc_offset_finding, clipping_finding, dynamics_findings, delay_finding, nonlinearity_finding,
-             disturbance_finding, input_noise_finding, clock_drift_finding, time_variation_finding,
-             under_modelled_finding)
+DETECTORS = _Detectors()
 
 
 class Diagnosis(list):
-    """The ranked findings (a list of dicts) with the comparison they were based on."""
+    """The ranked findings (``Finding`` records) with the comparison they were based on."""
 
     def __init__(self, findings, comparison, seconds: float):
         super().__init__(findings)
@@ -59,8 +67,12 @@ class Diagnosis(list):
         self.seconds = seconds
 
     @property
-    def significant(self) -> list[dict]:
-        return [f for f in self if f["significant"]]
+    def significant(self) -> list[Finding]:
+        return [f for f in self if f.significant]
+
+    def to_dicts(self) -> list[dict]:
+        """The findings as the ``helmet-anc/diagnosis@1`` JSON's ``findings`` list."""
+        return [f.to_dict() for f in self]
 
 
 def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_s: float = TRANSIENT_S,
@@ -78,13 +90,28 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
     noise = corrected(noise, model.clock_ratio)
     sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
     ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
-    findings = ctx.cache["findings"] = []
-    for detector in DETECTORS:
+    findings = ctx.findings
+    for detector in registry.detector_order():
         found = detector(ctx)
         findings.extend(found if isinstance(found, list) else [found])
-    # A finding that biases the others' linear reference (a long missing delay) leads; then by score.
-    findings.sort(key=lambda f: (not f["significant"], not f["evidence"].get("leads", False), -f["score"]))
+    findings.sort(key=lambda f: (not f.significant, -f.score))
+    findings[:] = _leading_first(findings)
     return Diagnosis(findings, comparison, time.perf_counter() - t0)
+
+
+def _leading_first(findings: list[Finding]) -> list[Finding]:
+    """A significant finding that biases the linear reference of other detectors (``evidence["leads"]``:
+    a long missing delay) moves ahead of the findings of the effects that declare they need it
+    (``Effect.needs``: the input polynomial judged on the model's linear prediction); the rest keep
+    their rank by score."""
+    ordered = list(findings)
+    for lead in [f for f in findings if f.significant and f.evidence.get("leads")]:
+        position = ordered.index(lead)
+        biased = [k for k, f in enumerate(ordered[:position])
+                  if f.effect in registry.names() and lead.effect in registry.get(f.effect).needs]
+        if biased:
+            ordered.insert(biased[0], ordered.pop(position))
+    return ordered
 
 
 def format_findings(findings, limit: int | None = None) -> str:

@@ -11,6 +11,7 @@ scale: nothing clips.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import numpy as np
 import scipy.interpolate
 import scipy.signal
 
+from . import effects as registry
 from .data_quality import clipped_samples
 from .effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .errors import HelmetAncError
@@ -25,39 +27,32 @@ from .files import atomic_write, atomic_write_text
 from .model import Model
 from .plants import appendix_a_model
 from .recordings import Recording, write_wav16
-from .structures import factor_coefficients, series, tf_to_statespace
+from .structures import series, tf_to_statespace
+from .thresholds import TRANSIENT_S
 
 __all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
            "SIMULATED_EFFECTS", "random_effect"]
 
 TRUTH_FORMAT = "helmet-anc/truth@1"
 
-# Hidden effects of a synthetic session and their parameters (typical values: effects.md).
-SIMULATED_EFFECTS = {
-    "delay": (ParameterSpec("samples", 23, 1, 2000, "int"),),
-    "resonance": (ParameterSpec("f0_hz", 3400.0, 20.0, 22000.0), ParameterSpec("q", 8.0, 0.5, 200.0),
-                  ParameterSpec("gain_db", 10.0, -30.0, 30.0)),
-    "highpass": (ParameterSpec("corner_hz", 60.0, 1.0, 5000.0), ParameterSpec("order", 1, 1, 2, "int")),
-    "lowpass": (ParameterSpec("corner_hz", 2500.0, 50.0, 22000.0), ParameterSpec("order", 2, 1, 2, "int")),
-    # Harmonic levels (dB re the fundamental) of a sine at the session's largest input amplitude.
-    "input-nonlinearity": (ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0)),
-    # Lines at k * frequency_hz, k = 1..harmonics, RMS level / k (FS) each.
-    "periodic-disturbance": (ParameterSpec("frequency_hz", 50.0, 1.0, 22000.0), ParameterSpec("harmonics", 3, 1, 40, "int"),
-                             ParameterSpec("level", 1e-3, 0.0, 0.5)),
-    # Input-channel SNR (dB) inside the noise excitation's band; the noise itself is white.
-    "input-noise": (ParameterSpec("snr_db", 10.0, -20.0, 80.0),),
-    "dc-offset": (ParameterSpec("level", 0.01, -0.5, 0.5), ParameterSpec("channel", 1, 0, 1, "int")),
-    # Clean ear-signal peak relative to the clip level; a preamplifier flat-tops at level (FS),
-    # the 16-bit converter at 1.
-    "clipping": (ParameterSpec("peak", 1.3, 1.0, 8.0), ParameterSpec("level", 1.0, 0.01, 1.0)),
-    # Gain change below corner_hz from the start to the end of the session (a changing leak).
-    # step 0: a linear change over the session; step k = 1 or 2: the change happens at once before sweep k
-    # (the helmet re-seated between recordings).
-    "time-variation": (ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0),
-                       ParameterSpec("step", 0, 0, 2, "int")),
-    # Ear-channel clock error relative to the input channel (parts per million; positive = ear clock fast).
-    "clock-drift": (ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
-}
+class _SimulatedEffects(Mapping):
+    """Hidden effects of a synthetic session and their parameters, read live from the registry
+    (``sysid.effects``: each effect's ``simulate_params``; typical values: effects.md)."""
+
+    def _table(self) -> dict:
+        return {e.name: e.simulate_params for e in registry.effects() if e.simulated}
+
+    def __getitem__(self, name):
+        return self._table()[name]
+
+    def __iter__(self):
+        return iter(self._table())
+
+    def __len__(self):
+        return len(self._table())
+
+
+SIMULATED_EFFECTS = _SimulatedEffects()
 
 
 @dataclass(frozen=True)
@@ -68,7 +63,7 @@ class SessionSpec:
     seed: int = 0
     fs: float = 44100.0
     noise_duration: float = 20.0
-    transient_s: float = 3.0
+    transient_s: float = TRANSIENT_S
     noise_cutoff: float = 5000.0
     sweep_duration: float = 5.0
     sweep_silence: float = 0.5
@@ -208,11 +203,13 @@ def _parse_effects(effects, fs: float) -> dict[str, dict]:
 
 
 def _effective_plant(base: Model, hidden: dict[str, dict]) -> Model:
-    """The base plant with the hidden linear effects in series (delay, resonance, filters)."""
+    """The base plant with the hidden linear effects in series: the delay, and every effect that is
+    a factor (``Effect.factor``: resonance, high-/low-pass, a user's own)."""
     system = (base.A, base.B, base.C, base.D)
-    for kind in ("resonance", "highpass", "lowpass"):
-        if kind in hidden:
-            system = series(system, tf_to_statespace(*factor_coefficients(kind, hidden[kind], base.fs)))
+    for kind, params in hidden.items():
+        factor = registry.get(kind).factor
+        if factor is not None:
+            system = series(system, tf_to_statespace(*factor(params, base.fs)))
     delay = base.delay + (hidden["delay"]["samples"] if "delay" in hidden else 0)
     A, B, C, D = system
     return Model(path=base.path, fs=base.fs, A=A, B=B, C=C, D=D, delay=delay,
@@ -311,37 +308,9 @@ def write_session(session: Session, outdir) -> dict[str, Path]:
 
 def random_effect(kind: str, rng: np.random.Generator) -> tuple[str, str | None, float | None]:
     """A hidden effect with random parameters in effects.md's ranges: (spec for ``simulate_session``,
-    the diagnosis parameter that estimates it or None, its true value in that parameter's units)."""
-    if kind == "delay":
-        d = int(rng.integers(5, 50))
-        return f"delay:{d}", "samples", d
-    if kind == "periodic-disturbance":
-        f = float(rng.choice([50.0, 60.0, 41.7]))
-        return f"periodic-disturbance:{f},3,{rng.uniform(3e-4, 2e-3):.2e}", "frequencies_hz", f
-    if kind == "input-nonlinearity":
-        h2 = float(rng.uniform(-45, -30))
-        return f"input-nonlinearity:{h2:.1f},{rng.uniform(-45, -30):.1f}", "h2_db", h2
-    if kind == "input-noise":
-        snr = float(rng.uniform(3, 12))
-        return f"input-noise:{snr:.1f}", "input_snr_db", snr
-    if kind == "clock-drift":
-        ppm = float(rng.uniform(20, 100) * rng.choice([-1, 1]))
-        return f"clock-drift:{ppm:.1f}", "ppm", ppm
-    if kind == "time-variation":
-        return f"time-variation:{rng.uniform(2, 5) * rng.choice([-1, 1]):.1f},200,{int(rng.integers(0, 3))}", None, None
-    if kind == "dc-offset":
-        level = float(rng.uniform(0.003, 0.03) * rng.choice([-1, 1]))
-        return f"dc-offset:{level:.4f}", "ear_offset_fs", level
-    if kind == "clipping":
-        return f"clipping:{rng.uniform(1.1, 1.6):.2f},{rng.choice([1.0, rng.uniform(0.1, 0.6)]):.2f}", None, None
-    if kind == "resonance":
-        f0 = float(np.exp(rng.uniform(np.log(60.0), np.log(3600.0))))
-        return (f"resonance:{f0:.1f},{rng.uniform(3, 15):.2f},{rng.uniform(6, 14) * rng.choice([1, 1, -1]):.2f}",
-                "f0_hz", f0)
-    if kind == "highpass":
-        corner = float(rng.uniform(10.0, 80.0))
-        return f"highpass:{corner:.1f},{int(rng.integers(1, 3))}", "corner_hz", corner
-    if kind == "lowpass":
-        corner = float(np.exp(rng.uniform(np.log(1000.0), np.log(16000.0))))
-        return f"lowpass:{corner:.0f},{int(rng.integers(1, 3))}", "corner_hz", corner
-    raise ValueError(kind)
+    the diagnosis parameter that estimates it or None, its true value in that parameter's units);
+    the effect's own ``random`` (``sysid.effects``)."""
+    effect = registry.get(kind)
+    if effect.random is None:
+        raise HelmetAncError(f"effect {kind} has no random parameters")
+    return effect.random(rng)

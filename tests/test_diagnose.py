@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from sysid.diagnose import diagnose, format_findings
+from sysid.diagnose import Finding, diagnose, format_findings
 
 from effect_sessions import effect_case, random_factor, reference_case
 
@@ -25,8 +25,10 @@ def test_clean_sessions_have_no_significant_finding(path, seed):
     session, model = effect_case(path, seed, ())
     findings = diagnose(model, session.noise, session.sweeps)
     assert findings.significant == [], format_findings(findings)
-    assert all(set(f) == CONTRACT for f in findings)
-    json.dumps(list(findings), allow_nan=False)
+    assert all(set(f.to_dict()) == CONTRACT for f in findings)
+    text = json.dumps(findings.to_dicts(), allow_nan=False)
+    # The typed records survive the JSON round trip.
+    assert [Finding.from_dict(d) for d in json.loads(text)] == list(findings)
 
 
 @pytest.mark.parametrize("path, samples", [("ff", 23), ("fb", 14), ("ff", 6)])

@@ -77,7 +77,12 @@ def test_auto_finds_and_fixes_delay_and_hum_together():
     session, model = effect_case("ff", 6, ("delay:23", "periodic-disturbance:50,2,1e-3"))
     auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
     final, steps = auto.model, auto.steps
-    assert {s.effect for s in steps if s.accepted} == {"delay", "periodic-disturbance"}
+    kept = [s for s in steps if s.accepted]
+    assert "periodic-disturbance" in {s.effect for s in kept} and {s.effect for s in kept} <= {"delay",
+                                                                                                "periodic-disturbance"}
+    # The delay is its own step, or the re-identification behind the disturbance model found it (and says so).
+    assert any(s.effect == "delay" or "total_delay_samples" in s.params for s in kept)
+    assert final.delay in (22, 23, 24)
     assert compare(final, session.sweeps).ratio <= 1.2
     assert [h["effect"] for h in final.history] == [s.effect for s in steps if s.accepted]
     assert auto.stop_reason == "at the floor"

@@ -30,7 +30,7 @@ def run(args) -> int:
     if target:
         atomic_write_text(target, json.dumps({"format": DIAGNOSIS_FORMAT, "model": args.model, "rms": findings.comparison.rms,
                                               "noise_floor": findings.comparison.noise_floor,
-                                              "findings": list(findings)}, indent=2) + "\n")
+                                              "findings": findings.to_dicts()}, indent=2) + "\n")
     print(f"{args.model}: rms {findings.comparison.rms:.3e} FS, {findings.comparison.ratio:.2f}x the noise floor")
     print(format_findings(findings))
     if target:

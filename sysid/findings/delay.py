@@ -18,10 +18,10 @@ from threadpoolctl import threadpool_limits
 from .. import lti
 from ..output_error import BlockData, block_data, linear_cost, refine_output_error
 from ..recordings import Recording
-from ..thresholds import LEADING_PHASE_DEG
+from ..thresholds import EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG
 from ..validation import VALIDATION_BAND, rms_from_responses, sweep_spectrum
 from . import SPEED_OF_SOUND, DiagnosisContext, finding
-from .dynamics import arbitrate
+from .dynamics import arbitrate, series_factor_finding
 
 __all__ = ["delay_finding", "scan_delay", "refit_rms", "MAX_EXTRA_DELAY"]
 
@@ -29,17 +29,15 @@ MAX_EXTRA_DELAY = 120
 # The best delay must lower the fixed-pole cost by this factor, and the model must be
 # this far above the noise floor, before a delay is called missing.
 COST_RATIO = 1.05
-EXCESS = 1.2
 CLEAR_RATIO = 1.5
-REFIT_GAIN = 1.25
-FACTOR_EXPLAINS = 2.0
+REFIT_GAIN = EXPLAINS_GAIN
 
 
 def _scan_data(ctx: DiagnosisContext) -> BlockData:
     if "delay_data" not in ctx.cache:
         body = ctx.body
         v = ctx.model.apply_input_nonlinearity(body.u)
-        full = block_data(Recording(v, body.y, body.fs, body.path), (20.0, 5000.0), 1.0)
+        full = block_data(Recording(v, body.y, body.fs, body.path), IDENTIFICATION_BAND, 1.0)
         # Every 4th bin of a 1 s block: the cost's shape in d is kept, the solve is 4x cheaper.
         ctx.cache["delay_data"] = BlockData(full.z[::4], full.U[::4], full.Y[::4], full.length, full.fs)
     return ctx.cache["delay_data"]
@@ -117,7 +115,7 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
     refit_gain = None
     # The slower checks below are for an error nothing else explains; a series factor that
     # brings the sweeps near the noise floor does.
-    factor = ctx.cache.get("series_factor_finding")
+    factor = series_factor_finding(ctx)
     explained = factor is not None and factor["evidence"]["rms_with_factor"] <= FACTOR_EXPLAINS * ctx.comparison.noise_floor
     if not significant and ctx.excess >= EXCESS and not explained:
         if extra < 1 or ratio < COST_RATIO:
@@ -142,10 +140,10 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
                        f"non-minimum-phase zeros (fixed-pole cost falls {ratio:.2f}x at delay {best})")
     else:
         explanation = "no delay beyond the model's own lowers the fit cost"
-    ctx.cache["delay_finding"] = finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
+    found = finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
                    {"samples": extra, "total_samples": best, "microseconds": microseconds, "sound_path_cm": centimetres},
                    explanation, f"refine --add delay:{extra}" if extra >= 1 else "none",
                    {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain,
                     "excess_phase_deg": excess_phase, "leads": bool(significant and excess_phase >= LEADING_PHASE_DEG)})
-    arbitrate(ctx.cache["delay_finding"], ctx)
-    return ctx.cache["delay_finding"]
+    arbitrate(found, ctx)
+    return found

@@ -15,9 +15,10 @@ import numpy as np
 import scipy.ndimage
 
 from ..compare import fit_sinusoids
+from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding
-from .dynamics import factor_residual, within_resonance
+from .dynamics import factor_residual, has_series_factor, within_resonance
 
 __all__ = ["disturbance_finding", "find_lines"]
 
@@ -26,7 +27,7 @@ MAX_LINES = 12
 NEIGHBOURHOOD_HZ = 20.0
 
 
-def find_lines(x: np.ndarray, u: np.ndarray, fs: float, band=(20.0, 5000.0), known=()) -> list[tuple[float, float, float]]:
+def find_lines(x: np.ndarray, u: np.ndarray, fs: float, band=IDENTIFICATION_BAND, known=()) -> list[tuple[float, float, float]]:
     """(frequency Hz, ratio to neighbourhood, RMS level FS) of the lines of x that u lacks."""
     n = x.size
     window = np.hanning(n)
@@ -81,7 +82,7 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
                   if not within_resonance(ctx, line[0])]
     first = int(round(SKIP_S * ctx.fs))
     sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
-    if candidates and "series_factor" in ctx.cache:
+    if candidates and has_series_factor(ctx):
         sweep_residuals = [factor_residual(ctx, s["residual"], s["linear"]) for s in ctx.comparison.per_sweep]
     lines = [line for line in candidates if all(_in_sweep(r[first:], line[0], ctx.fs) for r in sweep_residuals)]
     significant = bool(lines)

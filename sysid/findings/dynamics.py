@@ -38,15 +38,15 @@ import scipy.optimize
 import scipy.signal
 
 from .. import structures
+from ..thresholds import EXCESS, EXPLAINS_GAIN
 from ..validation import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
 from . import DiagnosisContext, finding
 
 __all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins",
-           "sweep_bins", "FactorFit", "fit_factor", "FAMILIES"]
+           "sweep_bins", "FactorFit", "fit_factor", "FAMILIES", "series_factor_finding", "has_series_factor"]
 
-GAIN = 1.25
+GAIN = EXPLAINS_GAIN
 SHARE = 0.8
-EXCESS = 1.2
 SIMPLER = 1.03
 # Bounds of the fitted parameters. Q beyond 30 would let a line fit a hum bin; below 1 a
 # "resonance" is a broad gain change, not a mode. f0 stays inside the band (fractions of its edges).
@@ -246,17 +246,23 @@ def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
         findings.append(finding(family, significant, gain / GAIN, params, explanation, remedy,
                                 {"rms_over_floor": ctx.excess, "rms_gain": gain, "explained_share": share,
                                  "rms_with_factor": fit.rms}))
-    leading = next((f for f in findings if f["significant"]), None)
-    if leading is not None:
-        # Later detectors judge what the factor leaves (a big linear misfit correlates with u^3 too).
-        ctx.cache["series_factor"] = structures.factor_coefficients(leading["effect"], leading["params"], ctx.fs)
-        ctx.cache["series_factor_finding"] = leading
+    # Later detectors (which declare they need these effects) judge what a significant factor
+    # leaves (a big linear misfit correlates with u^3 too): ``series_factor_finding``.
     return findings
+
+
+def series_factor_finding(ctx: DiagnosisContext):
+    """The significant series-factor finding among the context's findings so far, or None."""
+    return next((f for f in ctx.findings if f["significant"] and f["effect"] in FAMILIES), None)
+
+
+def has_series_factor(ctx: DiagnosisContext) -> bool:
+    return series_factor_finding(ctx) is not None
 
 
 def factor_residual(ctx: DiagnosisContext, residual: np.ndarray, prediction: np.ndarray) -> np.ndarray:
     """The residual with the significant series factor applied to the model's prediction."""
-    return residual + prediction - with_series_factor(ctx, prediction) if "series_factor" in ctx.cache else residual
+    return residual + prediction - with_series_factor(ctx, prediction) if has_series_factor(ctx) else residual
 
 
 def within_resonance(ctx: DiagnosisContext, frequency: float) -> bool:
@@ -265,7 +271,7 @@ def within_resonance(ctx: DiagnosisContext, frequency: float) -> bool:
     What is left of a lightly damped mode after its fitted factor still rings there,
     and looks like a line against a flat input spectrum.
     """
-    found = ctx.cache.get("series_factor_finding")
+    found = series_factor_finding(ctx)
     if found is None or found["effect"] != "resonance":
         return False
     return abs(frequency - found["params"]["f0_hz"]) <= found["params"]["f0_hz"] / found["params"]["q"]
@@ -273,9 +279,10 @@ def within_resonance(ctx: DiagnosisContext, frequency: float) -> bool:
 
 def with_series_factor(ctx: DiagnosisContext, x: np.ndarray) -> np.ndarray:
     """x through the significant series factor found by ``dynamics_findings`` (x itself when none)."""
-    if "series_factor" not in ctx.cache:
+    found = series_factor_finding(ctx)
+    if found is None:
         return x
-    return scipy.signal.lfilter(*ctx.cache["series_factor"], x)
+    return scipy.signal.lfilter(*structures.factor_coefficients(found["effect"], found["params"], ctx.fs), x)
 
 
 def arbitrate(delay: dict, ctx: DiagnosisContext) -> None:
@@ -286,7 +293,7 @@ def arbitrate(delay: dict, ctx: DiagnosisContext) -> None:
     same sweep bins. The loser is marked not significant, with the reason; a factor
     that loses no longer shapes what later detectors see.
     """
-    factor = ctx.cache.get("series_factor_finding")
+    factor = series_factor_finding(ctx)
     if factor is None or not delay["significant"]:
         return
     bins = sweep_bins(ctx)
@@ -299,5 +306,3 @@ def arbitrate(delay: dict, ctx: DiagnosisContext) -> None:
     loser["significant"] = False
     loser["explanation"] = f"not significant ({winner['effect']} explains the sweeps better); " + loser["explanation"]
     loser["remedy"] = "none"
-    if loser is factor:
-        del ctx.cache["series_factor"], ctx.cache["series_factor_finding"]

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, linear_part
-from .dynamics import with_series_factor
+from .dynamics import has_series_factor, with_series_factor
 
 __all__ = ["nonlinearity_finding", "polynomial_columns"]
 
@@ -47,7 +47,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
         columns = polynomial_columns(ctx.model, sweep.u, prediction=record["linear"])
         residual = record["residual"]
-        if "series_factor" in ctx.cache:
+        if has_series_factor(ctx):
             # What a significant series factor leaves: the factor applies to every column.
             filtered = np.stack([with_series_factor(ctx, c) for c in columns.T], axis=1)
             residual = residual + columns[:, 0] - filtered[:, 0]

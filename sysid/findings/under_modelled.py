@@ -37,7 +37,7 @@ def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
 def under_modelled_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     # An offset (at DC) or a change between recordings explains no in-band error of the model.
-    explained = any(f["significant"] and f["effect"] not in NO_IN_BAND_ERROR for f in ctx.cache.get("findings", ()))
+    explained = any(f["significant"] and f["effect"] not in NO_IN_BAND_ERROR for f in ctx.findings)
     if ctx.excess < EXCESS or explained:
         reason = "the model is at the noise floor" if ctx.excess < EXCESS else "a named effect explains the error"
         return finding("under-modelled", False, 0.0, {"order": model.order}, f"not tested: {reason}", "none")

@@ -21,6 +21,7 @@ import scipy.signal
 
 from ..compare import third_octave_bands
 from ..data_quality import clipped_samples
+from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding
 
@@ -183,7 +184,7 @@ def time_variation_finding(ctx: DiagnosisContext) -> dict:
     halves = level[:half].mean(axis=0) - level[half:].mean(axis=0)
     interleaved = level[0::2].mean(axis=0) - level[1::2].mean(axis=0)
     results = {}
-    for name, band in (("low", (20.0, 300.0)), ("wide", (20.0, 5000.0))):
+    for name, band in (("low", (20.0, 300.0)), ("wide", IDENTIFICATION_BAND)):
         use = (f >= band[0]) & (f <= band[1]) & np.all(coherence > 0.5, axis=0)
         if np.count_nonzero(use) < 3:
             results[name] = (0.0, 0.0)

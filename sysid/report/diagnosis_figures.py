@@ -1,27 +1,31 @@
 """Evidence of each diagnosis finding, and the error falling through the refinement history.
 
-``finding_figure`` picks the plot that shows a finding's evidence from its effect name
-(design.md's vocabulary); an effect without a dedicated plot gets the model's
+``finding_figure`` picks the plot that shows a finding's evidence from the figure kind
+its effect names in the registry (``sysid.effects``); an effect without a dedicated plot gets the model's
 frequency-response mismatch against the measurement, with the finding's frequencies
 marked. ``refinement_figure`` draws ``model.history`` as a staircase.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import scipy.signal
 
+from .. import effects as registry
 from .. import structures
 from ..findings import DiagnosisContext
 from ..findings.delay import scan_delay
 from ..findings.variation import segment_responses
 from ..spectra import Spectra, response
+from ..thresholds import IDENTIFICATION_BAND
 from .signals import instantaneous_frequency
 from .style import COLORS, db, log_frequency_axis, new_figure
 
-__all__ = ["FINDING_PLOTS", "finding_figure", "refinement_figure"]
+__all__ = ["FINDING_PLOTS", "FIGURE_KINDS", "finding_figure", "refinement_figure"]
 
-_BAND = (20.0, 5000.0)
+_BAND = IDENTIFICATION_BAND
 
 
 def _title(ax, finding: dict) -> None:
@@ -206,30 +210,46 @@ def _mismatch(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float
 
 
 def _series_factor(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
-    """Measured / model response with the fitted factor's response over it (resonance, high-/low-pass)."""
+    """Measured / model response with the fitted factor's response over it (an effect with a ``factor``)."""
     figure = _mismatch(ctx, spectra, finding, dpi)
     f = np.geomspace(_BAND[0], _BAND[1], 400)
-    h = structures.factor_response(*structures.factor_coefficients(finding["effect"], finding["params"], ctx.fs), f, ctx.fs)
+    h = structures.factor_response(*registry.get(finding["effect"]).factor(finding["params"], ctx.fs), f, ctx.fs)
     figure.axes[0].plot(f, db(h), color=COLORS["model"], lw=1.2, ls="--", label=f"fitted {finding['effect']} factor")
     figure.axes[1].plot(f, np.angle(h, deg=True), color=COLORS["model"], lw=1.2, ls="--")
     figure.axes[0].legend(fontsize=7)
     return figure
 
 
-FINDING_PLOTS = {
-    "delay": _delay,
-    "resonance": _series_factor,
-    "highpass": _series_factor,
-    "lowpass": _series_factor,
-    "under-modelled": _mismatch,
-    "input-nonlinearity": _nonlinearity,
-    "periodic-disturbance": _disturbance,
-    "input-noise": _input_noise,
-    "time-variation": _variation,
-    "clock-drift": _variation,
-    "dc-offset": _recording_levels,
-    "clipping": _recording_levels,
+# The figure kinds the registry's effects name (``sysid.effects.FIGURES``).
+FIGURE_KINDS = {
+    "delay-scan": _delay,
+    "series-factor": _series_factor,
+    "harmonics": _nonlinearity,
+    "lines": _disturbance,
+    "h1-h2": _input_noise,
+    "segments": _variation,
+    "levels": _recording_levels,
+    "mismatch": _mismatch,
 }
+
+
+class _FindingPlots(Mapping):
+    """Effect name -> the plot of its figure kind, read live from the registry (``sysid.effects``)."""
+
+    def _table(self) -> dict:
+        return {e.name: FIGURE_KINDS[e.figure] for e in registry.effects()}
+
+    def __getitem__(self, name):
+        return self._table()[name]
+
+    def __iter__(self):
+        return iter(self._table())
+
+    def __len__(self):
+        return len(self._table())
+
+
+FINDING_PLOTS = _FindingPlots()
 
 
 def finding_figure(finding: dict, context: DiagnosisContext, spectra: Spectra, dpi: float = 100.0):

@@ -1,0 +1,182 @@
+"""The registry of physical effects: one module per effect, one ``Effect`` object each.
+
+An ``Effect`` holds everything the product knows about one physical effect a
+low-order model misses (effects.md): its name, its parameters with units and
+ranges (``sysid.effect_spec.ParameterSpec``) for ``simulate --effect`` and for
+``refine --add``, how ``simulate`` adds it (a series factor, or the session
+simulator's own code for the effects that act on the recordings), its detector
+(score, significance, estimates, explanation, remedy; ``sysid.findings``), the
+detectors whose findings it reads (``needs``), the model structure or data
+correction ``refine`` adds (``build``), the finding parameters ``refine --auto``
+passes on (``auto_params``), and the kind of figure the report draws for it.
+
+``simulate``, ``diagnose``, ``refine`` and the report look effects up here; an
+effect a user writes is one module that builds an ``Effect`` and calls
+``register`` (README, "Your own effect"), and is then simulated, diagnosed and
+refined like the built-in ones. The built-in effects register on import of this
+package, in the order below, which is also the order their detectors run in
+when ``needs`` does not say otherwise.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Callable
+
+from ..effect_spec import ParameterSpec
+from ..errors import HelmetAncError
+
+__all__ = ["Effect", "register", "unregister", "registered", "get", "effects", "names", "detector_order",
+           "FIGURES"]
+
+# The figure kinds of the report (``sysid.report.diagnosis_figures``): delay-scan (fit cost against
+# the delay), series-factor (measured/model response with the fitted factor over it), harmonics
+# (error spectrogram with the sweep's harmonics), lines (residual spectrum with the lines), h1-h2,
+# segments (per-segment responses and delays), levels (per-channel bars), mismatch (measured/model).
+FIGURES = ("delay-scan", "series-factor", "harmonics", "lines", "h1-h2", "segments", "levels", "mismatch")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One physical effect: what simulates it, detects it, and models or corrects it.
+
+    ``detect(ctx)`` returns one finding or a list (one detector may judge several
+    effects, e.g. the series factors' family fit); ``needs`` names the effects
+    whose findings it reads from ``ctx.findings`` (they run first); ``needs_all``:
+    it reads every other finding (under-modelled, asked last). ``build(model, noise,
+    sweeps, params, options, transient_s) -> (model, extra params)`` adds the
+    structure or correction; ``complete(params, ctx, before) -> params`` fills parameters
+    ``refine --add`` left at None from the data; ``accept``: how ``refine --auto`` judges
+    the step - "in-band" (the validation rms falls by more than its run-to-run noise),
+    "full-band" (an offset at DC: the full-band rms falls, the in-band rms does not rise),
+    "not-worse" (removes a bias the rms cannot show); ``not_refinable`` says why there is
+    no structure.
+    ``factor(params, fs) -> (b, a)``: the effect is a linear factor in series with
+    the plant (how ``simulate`` adds it; the other built-in effects act on the
+    recordings and are simulated by ``sysid.simulate`` itself). ``random(rng) ->
+    (spec, estimated parameter or None, its true value or None)`` draws the effect at
+    random parameters in effects.md's ranges (the tests' and benchmarks' sessions). ``kind``: "structure" (a part of the
+    plant's model), "correction" (of the data: applied first by ``refine --auto``),
+    "disturbance" (explains part of the output, not the plant) or "report" (named only).
+    """
+
+    name: str
+    summary: str
+    simulate_params: tuple[ParameterSpec, ...] | None = None
+    refine_params: tuple[ParameterSpec, ...] | None = None
+    detect: Callable | None = None
+    needs: tuple[str, ...] = ()
+    needs_all: bool = False
+    build: Callable | None = None
+    complete: Callable | None = None
+    accept: str = "in-band"
+    not_refinable: str = ""
+    auto_params: Callable[[dict], dict] | None = None
+    kind: str = "structure"
+    factor: Callable | None = None
+    figure: str = "mismatch"
+    random: Callable | None = None
+
+    def __post_init__(self):
+        if self.figure not in FIGURES:
+            raise HelmetAncError(f"effect {self.name}: figure must be one of {', '.join(FIGURES)}; found {self.figure!r}")
+        if self.kind not in ("structure", "correction", "disturbance", "report"):
+            raise HelmetAncError(f"effect {self.name}: kind must be structure, correction, disturbance or report")
+        if self.accept not in ("in-band", "full-band", "not-worse"):
+            raise HelmetAncError(f"effect {self.name}: accept must be in-band, full-band or not-worse")
+        if self.build is not None and self.refine_params is None:
+            raise HelmetAncError(f"effect {self.name}: a structure needs its refine_params (may be empty)")
+
+    @property
+    def refinable(self) -> bool:
+        return self.build is not None
+
+    @property
+    def simulated(self) -> bool:
+        return self.simulate_params is not None
+
+
+_REGISTRY: dict[str, Effect] = {}
+
+
+def register(effect: Effect, replace: bool = False) -> Effect:
+    """Add ``effect`` to the registry (by name); a second effect of the same name needs ``replace``."""
+    if effect.name in _REGISTRY and not replace and _REGISTRY[effect.name] is not effect:
+        raise HelmetAncError(f"effect {effect.name!r} is registered already; pass replace=True to replace it")
+    for need in effect.needs:
+        if need not in _REGISTRY:
+            raise HelmetAncError(f"effect {effect.name}: needs {need!r}, which is not registered")
+    _REGISTRY[effect.name] = effect
+    return effect
+
+
+def unregister(name: str) -> None:
+    """Remove an effect (a user effect registered for one session or test)."""
+    _REGISTRY.pop(name, None)
+
+
+@contextmanager
+def registered(effect: Effect):
+    """``with registered(MY_EFFECT): ...``: the effect is in the registry inside the block only."""
+    previous = _REGISTRY.get(effect.name)
+    register(effect, replace=True)
+    try:
+        yield effect
+    finally:
+        if previous is None:
+            unregister(effect.name)
+        else:
+            _REGISTRY[effect.name] = previous
+
+
+def get(name: str) -> Effect:
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise HelmetAncError(f"unknown effect {name!r}; expected one of {', '.join(_REGISTRY)}") from None
+
+
+def effects() -> list[Effect]:
+    """Every registered effect, in registration order."""
+    return list(_REGISTRY.values())
+
+
+def names() -> list[str]:
+    return list(_REGISTRY)
+
+
+def detector_order() -> list[Callable]:
+    """The distinct detectors, each after the detectors of the effects it needs; those that read
+    every finding (``needs_all``) last. Registration order breaks ties."""
+    ordered: list[Callable] = []
+    done: set[str] = set()
+    pending = [e for e in _REGISTRY.values() if e.detect is not None]
+    last = [e for e in pending if e.needs_all]
+    pending = [e for e in pending if not e.needs_all]
+    while pending:
+        ready = next((e for e in pending if all(n in done or _REGISTRY[n].detect is None for n in e.needs)), None)
+        if ready is None:
+            raise HelmetAncError("effects' detectors need each other in a cycle: " + ", ".join(e.name for e in pending))
+        pending.remove(ready)
+        # Effects that share one detector are done together.
+        done.update(e.name for e in _REGISTRY.values() if e.detect is ready.detect)
+        if ready.detect not in ordered:
+            ordered.append(ready.detect)
+    for effect in last:
+        if effect.detect not in ordered:
+            ordered.append(effect.detect)
+    return ordered
+
+
+def _load_builtin() -> None:
+    # One module per effect; importing it registers its Effect.
+    # the order is that of the detectors: data quality, the series factors, the delay (which settles
+    # a tie with them), then what the plant's misfit leaves, under-modelled last.
+    from . import dc_offset, clipping  # noqa: F401
+    from . import resonance, highpass, lowpass  # noqa: F401
+    from . import delay, input_nonlinearity, periodic_disturbance, input_noise  # noqa: F401
+    from . import clock_drift, time_variation, under_modelled  # noqa: F401
+
+
+_load_builtin()

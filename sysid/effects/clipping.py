@@ -1,0 +1,30 @@
+"""clipping: a converter or preamplifier that flat-tops, at full scale or below it (effects.md).
+
+Simulated as an ear channel whose clean peak is ``peak`` times the clip ``level`` (FS);
+detected as flat tops at any level on either channel and a histogram spike at the clip
+level (``sysid.data_quality``, ``sysid.findings.data_quality.clipping_finding``);
+corrected by leaving the clipped stretches out of identification and validation
+(the model's ``excluded``; ``sysid.refits.add_clipping``).
+"""
+
+from __future__ import annotations
+
+from ..effect_spec import ParameterSpec
+from ..findings.data_quality import clipping_finding
+from ..refits import add_clipping
+from . import Effect, register
+
+__all__ = ["CLIPPING"]
+
+
+def _random(rng):
+    return f"clipping:{rng.uniform(1.1, 1.6):.2f},{rng.choice([1.0, rng.uniform(0.1, 0.6)]):.2f}", None, None
+
+
+CLIPPING = register(Effect(
+    name="clipping", summary="flat tops of a channel at the converter's rails or a preamplifier's clip level",
+    # Clean ear-signal peak relative to the clip level; a preamplifier flat-tops at level (FS),
+    # the 16-bit converter at 1.
+    simulate_params=(ParameterSpec("peak", 1.3, 1.0, 8.0), ParameterSpec("level", 1.0, 0.01, 1.0)),
+    refine_params=(), detect=clipping_finding, build=add_clipping, auto_params=lambda p: {},
+    kind="correction", figure="levels", random=_random))
