@@ -212,12 +212,17 @@ def _variance_bound(model: Model, lin: _Linearisation, f: np.ndarray) -> tuple[n
     return np.sqrt(_CHI2_2_95 * np.maximum(largest, 0.0)), a + c
 
 
+def _h1_variance(model_response: np.ndarray, coherence: np.ndarray, averages: int) -> np.ndarray:
+    """E|H1 - H|^2 of the Welch H1 estimate, (1 - coh) / (n_eff coh) |H|^2 (Bendat & Piersol, eq. 9.73)."""
+    n_eff = averages / _WELCH_HANN_50
+    c = np.clip(coherence, 1e-12, 1.0)
+    return (1 - c) / (n_eff * c) * np.abs(model_response) ** 2
+
+
 def _misfit(model_response: np.ndarray, h1: np.ndarray, coherence: np.ndarray, averages: int,
             model_variance: np.ndarray) -> np.ndarray:
     """Moment estimate of the bias |H_model - H_true| (absolute); module docstring, part 2."""
-    n_eff = averages / _WELCH_HANN_50
-    c = np.clip(coherence, 1e-12, 1.0)
-    expected = (1 - c) / (n_eff * c) * np.abs(model_response) ** 2 + model_variance
+    expected = _h1_variance(model_response, coherence, averages) + model_variance
     observed = np.abs(model_response - h1) ** 2
     m = min(MISFIT_BINS, observed.size)
     mean_observed = scipy.ndimage.uniform_filter1d(observed, size=m, mode="nearest")
@@ -262,6 +267,18 @@ def frequency_response_band(model: Model, noise: Recording, spectra: Spectra | N
     magnitude = np.maximum(np.abs(H), np.finfo(float).tiny)
     bound, variance = _variance_bound(core, lin, f)
     method = "output-error covariance (sandwich, local noise power) and delta method, 95 %"
+    unknown = ~(np.isfinite(bound) & np.isfinite(variance))
+    if np.any(unknown):
+        # A pole on (or numerically at) the unit circle makes the information matrix
+        # overflow: no parametric variance there. The nonparametric H1 variance at the
+        # model's response is the error the data allow at best; the misfit then adds the bias.
+        if spectra is None or spectra.estimator != "h1":
+            raise IdentificationError("the model's parameter covariance is not finite (a pole on the unit circle?) "
+                                      "and no H1 spectra were given for a nonparametric band")
+        nonparametric = _h1_variance(H, frf.coherence, spectra.segments)
+        variance = np.where(unknown, nonparametric, variance)
+        bound = np.where(unknown, np.sqrt(_CHI2_2_95 * nonparametric / 2), bound)
+        method += f"; the H1 estimate's variance where the covariance is not finite ({100 * np.mean(unknown):.0f} %)"
     misfit = np.zeros_like(bound)
     if spectra is not None and spectra.estimator == "h1":
         misfit = _misfit(H, frf.g, frf.coherence, spectra.segments, variance)

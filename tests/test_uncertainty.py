@@ -65,6 +65,29 @@ class TestFrequencyResponseBand:
         assert _coverage(band, model, session.plant) >= 0.9
         assert band.median_width < 0.1
 
+    def test_a_covariance_that_overflows_falls_back_to_the_h1_variance(self, ff_case, monkeypatch):
+        # A pole at the unit circle makes the information matrix overflow; the band must stay
+        # finite (a model carrying NaN cannot be saved) and still cover the truth.
+        import dataclasses
+
+        import sysid.uncertainty as uncertainty
+        from sysid.spectra import estimate_spectra
+
+        session, model, body, _ = ff_case
+        exact = uncertainty.parameter_covariance
+
+        def overflowed(core, data):
+            lin = exact(core, data)
+            return dataclasses.replace(lin, covariance=np.full_like(lin.covariance, np.nan))
+
+        monkeypatch.setattr(uncertainty, "parameter_covariance", overflowed)
+        band = frequency_response_band(model, body, estimate_spectra(body), seconds=5.0)
+        assert np.all(np.isfinite(band.relative_95))
+        assert "not finite (100 %)" in band.method
+        assert _coverage(band, model, session.plant) >= 0.9
+        model.uncertainty = band.to_dict()
+        assert Model.from_dict(model.to_dict()).uncertainty is not None
+
     def test_variance_part_follows_square_root_law(self, ff_case):
         # Four times the data, half the scatter: the covariance scales as 1 / (number of bins).
         session, model, body, _ = ff_case
