@@ -97,9 +97,15 @@ def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient
 
 
 def _with(model: Model, core, **changes) -> Model:
-    """A copy of model with the core (A, B, C, D) and fields replaced."""
+    """A copy of model with the core (A, B, C, D) and fields replaced.
+
+    The model's uncertainty band stays only with its own core (a band belongs to the fit it
+    was estimated from); a re-identified core brings its own (``uncertainty=core.uncertainty``).
+    """
     A, B, C, D = core
+    same_core = all(np.array_equal(a, b) for a, b in zip((A, B, C, D), (model.A, model.B, model.C, model.D)))
     fields = dict(path=model.path, fs=model.fs, A=A, B=B, C=C, D=D, delay=model.delay,
+                  uncertainty=model.uncertainty if same_core else None,
                   input_nonlinearity=model.input_nonlinearity, disturbance_frequencies=model.disturbance_frequencies,
                   history=list(model.history), identification=dict(model.identification),
                   output_offset=model.output_offset, clock_ratio=model.clock_ratio, excluded=dict(model.excluded))
@@ -118,7 +124,8 @@ def add_delay(model, noise, sweeps, params, options, transient_s):
     for total in sorted({model.delay + params["samples"], max(model.delay + params["samples"] - 1, model.delay)}):
         core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), total),
                            model.disturbance_frequencies, options, transient_s)
-        trial = _with(model, _core(core), delay=total + core.delay, identification=dict(core.identification))
+        trial = _with(model, _core(core), uncertainty=core.uncertainty,
+                      delay=total + core.delay, identification=dict(core.identification))
         if not trial.stable:
             continue
         rms = compare(trial, sweeps).rms
@@ -140,7 +147,8 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     trial = _with(model, _core(model), input_nonlinearity=coefficients)
     core = _reidentify(model, noise, sweeps, lambda u: _shift(trial.apply_input_nonlinearity(u), model.delay),
                        model.disturbance_frequencies, options, transient_s)
-    return (_with(model, _core(core), delay=model.delay + core.delay, input_nonlinearity=coefficients,
+    return (_with(model, _core(core), uncertainty=core.uncertainty,
+                  delay=model.delay + core.delay, input_nonlinearity=coefficients,
                   identification=dict(core.identification)), {"coefficients": coefficients})
 
 
@@ -148,7 +156,8 @@ def add_periodic_disturbance(model, noise, sweeps, params, options, transient_s)
     frequencies = sorted(set((model.disturbance_frequencies or []) + list(params["frequencies_hz"])))
     core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
                        frequencies, options, transient_s)
-    refit = _with(model, _core(core), delay=model.delay + core.delay, disturbance_frequencies=frequencies,
+    refit = _with(model, _core(core), uncertainty=core.uncertainty,
+                  delay=model.delay + core.delay, disturbance_frequencies=frequencies,
                   identification=dict(core.identification))
     return _better(sweeps, _with(model, _core(model), disturbance_frequencies=frequencies), refit), \
         {"frequencies_hz": frequencies}
@@ -172,7 +181,8 @@ def add_order(model, noise, sweeps, params, options, transient_s):
     grown = _grown(model, data, blocks)
     core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
                        model.disturbance_frequencies, options, transient_s, extra_order=extra)
-    fresh = _with(model, _core(core), delay=model.delay + core.delay, identification=dict(core.identification))
+    fresh = _with(model, _core(core), uncertainty=core.uncertainty,
+                  delay=model.delay + core.delay, identification=dict(core.identification))
     best = min([t for t in (grown, fresh) if t.stable] or [grown], key=lambda t: compare(t, sweeps).rms)
     return best, {"order": best.order}
 
@@ -211,7 +221,8 @@ def series_factor(coefficients):
             core = _reidentify(model, noise, sweeps,
                                lambda u: scipy.signal.lfilter(b, a, _shift(model.apply_input_nonlinearity(u), model.delay)),
                                model.disturbance_frequencies, options, transient_s, min_order=1)
-            fresh = _with(model, series(factor, _core(core)), delay=model.delay + core.delay, identification=dict(core.identification))
+            fresh = _with(model, series(factor, _core(core)), uncertainty=core.uncertainty,
+                          delay=model.delay + core.delay, identification=dict(core.identification))
             ratio = compare(fresh, sweeps).ratio if fresh.stable else np.inf
             if ratio <= AT_FLOOR or not scored:
                 trials.append(fresh)
@@ -270,7 +281,8 @@ def add_clock_drift(model, noise, sweeps, params, options, transient_s):
     trial = _with(model, _core(model), clock_ratio=ratio)
     # A data correction changes the data, not the dynamics: the refit keeps at least the model's order.
     core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
-    refit = _with(trial, _core(core), delay=trial.delay + core.delay, identification=dict(core.identification))
+    refit = _with(trial, _core(core), uncertainty=core.uncertainty,
+                  delay=trial.delay + core.delay, identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"clock_ratio": ratio}
 
 
@@ -288,7 +300,8 @@ def add_clipping(model, noise, sweeps, params, options, transient_s):
         raise IdentificationError("--add clipping: no recording clips")
     trial = _with(model, _core(model), excluded=excluded)
     core = _reidentify(trial, noise, sweeps, _plain_input(trial), trial.disturbance_frequencies, options, transient_s)
-    refit = _with(trial, _core(core), delay=trial.delay + core.delay, identification=dict(core.identification))
+    refit = _with(trial, _core(core), uncertainty=core.uncertainty,
+                  delay=trial.delay + core.delay, identification=dict(core.identification))
     return _better(sweeps, trial, refit), {"excluded_fraction": [round(f, 6) for f in fractions]}
 
 

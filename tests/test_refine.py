@@ -30,8 +30,11 @@ def test_delay_refinement_reaches_the_noise_floor_and_survives_json(tmp_path):
     assert result.after.ratio <= 1.2
     assert result.model.history[-1]["effect"] == "delay"
     assert result.model.history[-1]["rms_after"] == pytest.approx(result.after.rms)
+    # The re-identified core brings its own band; the nominal model's belonged to another fit.
+    assert result.model.uncertainty is not None and result.model.uncertainty != model.uncertainty
     result.model.save(tmp_path / "m.json")
     again = Model.load(tmp_path / "m.json")
+    assert again.uncertainty == result.model.uncertainty
     assert compare(again, session.sweeps).rms == pytest.approx(result.after.rms, rel=1e-9)
 
 
