@@ -1,5 +1,7 @@
 """under-modelled: above twice the noise floor, diagnose never answers "nothing significant"."""
 
+import copy
+
 import pytest
 
 from sysid.diagnose import diagnose, format_findings
@@ -32,3 +34,15 @@ def test_more_order_brings_a_too_low_order_to_the_floor():
     auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
     assert auto.after.ratio <= 1.2, format_refinement(auto.steps, auto.stop_reason)
     assert auto.stop_reason.startswith("at the floor")
+
+
+def test_an_error_more_order_does_not_lower_is_not_called_a_too_low_order():
+    # The true plant with a 0.06 % gain error: above the floor, under twice it, and no mode helps.
+    session = simulate_session(short_spec("ff", 9))
+    model = copy.deepcopy(session.plant)
+    model.C = model.C * 1.0006
+    findings = diagnose(model, session.noise, session.sweeps)
+    assert 1.2 < findings.comparison.ratio < 2.0
+    under = next(f for f in findings if f["effect"] == "under-modelled")
+    assert not under["significant"]
+    assert "is not what the model lacks" in under["explanation"] and "too low" not in under["explanation"]

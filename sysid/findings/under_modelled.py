@@ -62,7 +62,10 @@ def under_modelled_finding(ctx: DiagnosisContext) -> dict:
                        f"{band['center_hz']:.0f} Hz) and no named effect explains it; one more mode alone lowers it "
                        f"{gain:.2f}x: try order {model.order + 2} or more, or look for an effect not in the registry")
     elif not significant:
-        explanation = f"not significant (one more mode lowers the error only {gain:.2f}x); " + explanation
+        # Then order is not what is missing: say so rather than call the order too low.
+        explanation = (f"not significant: the error is {ctx.excess:.1f}x the noise floor over {span}, but with one "
+                       f"more mode it is {1 / max(gain, 1e-12):.2f} times what it is now, so order {model.order} is "
+                       f"not what the model lacks")
     score = min(gain, order_gain) / GAIN
     return finding("under-modelled", significant or fallback, max(score, 1.0) if fallback else score,
                    {"order": model.order, "suggested_order": model.order + 2, "worst_band_hz": band["center_hz"],
