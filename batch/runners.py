@@ -90,7 +90,11 @@ def run_dask(tasks: list[SessionTask], scheduler=None, retries: int = DEFAULT_RE
     same session is never two tasks, and with ``retries`` so a task whose worker died
     runs again elsewhere. A task that still fails (e.g. ``KilledWorker``) gets a failed
     row with Dask's reason. Give workers one thread each (``--nthreads 1``): each task
-    limits BLAS to one thread, and that limit is per process, not per thread.
+    limits BLAS to one thread, and that limit is per process, not per thread. Dask's
+    nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which turns off glibc's
+    adaptive mmap threshold: measured, identification then spends 2.4x the CPU in page
+    faults (BENCHMARKS.md, Batch); set ``MALLOC_TRIM_THRESHOLD_`` and
+    ``MALLOC_MMAP_THRESHOLD_`` to 33554432 in the workers' environment instead.
     """
     from dask.distributed import Client, as_completed as dask_completed
 
