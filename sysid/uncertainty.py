@@ -174,8 +174,15 @@ def parameter_covariance(model: Model, data: BlockData) -> _Linearisation:
         meat += (weighted.conj().T @ weighted).real
     # Poles, numerators and transients differ by decades in scale: invert the equilibrated matrix.
     scale = np.sqrt(np.maximum(np.diag(information), np.finfo(float).tiny))
-    inverse = np.linalg.pinv(information / np.outer(scale, scale), rcond=1e-15, hermitian=True) / np.outer(scale, scale)
-    covariance = inverse @ meat @ inverse
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        equilibrated = information / np.outer(scale, scale)
+        if np.all(np.isfinite(equilibrated)) and np.all(np.isfinite(meat)):
+            inverse = np.linalg.pinv(equilibrated, rcond=1e-15, hermitian=True) / np.outer(scale, scale)
+            covariance = inverse @ meat @ inverse
+        else:
+            # A pole numerically at z = 1 overflows the information matrix: no parametric
+            # covariance; frequency_response_band falls back to the H1 variance where it is not finite.
+            covariance = np.full((p, p), np.nan)
     return _Linearisation(poles, params, pairs, theta, covariance)
 
 
