@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from anc import CONTROLLER_FORMAT, Controller, design
+from anc import CONTROLLER_FORMAT, Controller, DesignOptions, design
 from anc.basis import LaguerreBasis
 from anc.closed_loop import closed_loop_poles, run_closed_loop
 from anc.controller import StateSpaceFilter
+from anc.design import TRUNCATION_BANDS_HZ, TRUNCATION_TOLERANCE_DB
 from helmet_anc.cli import main
 from sysid.errors import HelmetAncError
 from sysid.model import Model
@@ -67,6 +68,35 @@ def test_feedback_filter_blocks_dc(seed_controller):
     """Q has no gain at DC, where the model is an extrapolation (the seed's FB path is 30x larger there)."""
     q = np.abs(seed_controller.fb.frequency_response([0.0, 1.0, 100.0], seed_controller.fs))
     assert q[0] < 1e-6 * q[2] and q[1] < 0.05 * q[2]
+
+
+@pytest.fixture(scope="module")
+def seed_full_order():
+    return design(appendix_a_model("fb"), appendix_a_model("ff"), options=DesignOptions(truncate=False))
+
+
+def test_truncated_filters_are_below_full_order(seed_controller, seed_full_order):
+    truncation = seed_controller.provenance["truncation"]
+    for name in ("fb", "ff"):
+        full = getattr(seed_full_order, name).order
+        assert getattr(seed_controller, name).order == truncation[name]["order"] < full == truncation[name]["full_order"]
+    assert any(note.startswith("Q truncated from order 26") for note in seed_controller.notes)
+
+
+def test_truncation_keeps_the_predicted_attenuation(seed_controller, seed_full_order):
+    """Per band 50 Hz - 1 kHz, W alone, Q alone and both within 0.1 dB of the full-order controller's."""
+    centres = np.array(seed_controller.bands_hz)
+    checked = (centres >= TRUNCATION_BANDS_HZ[0]) & (centres <= TRUNCATION_BANDS_HZ[1])
+    assert checked.sum() == 14  # 50, 63, ..., 800, 1000 Hz
+    for part in ("ff", "fb", "both"):
+        truncated = np.array(seed_controller.predicted_attenuation_db[part])[checked]
+        full = np.array(seed_full_order.predicted_attenuation_db[part])[checked]
+        np.testing.assert_allclose(truncated, full, atol=TRUNCATION_TOLERANCE_DB)
+
+
+def test_truncated_feedback_filter_keeps_the_robustness_bound(seed_controller):
+    """r95 |S_model Q| <= 0.5 on the design grid for the stored (truncated) Q, as for the full order."""
+    assert seed_controller.margins["robustness_factor"] >= 1.0
 
 
 def test_margins_reported(seed_controller):
