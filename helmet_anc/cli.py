@@ -84,8 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    (file or sys.stderr).write(f"helmet-anc: warning: {message}\n")
+def _one_line(message) -> str:
+    return f"helmet-anc: warning: {message}\n"
 
 
 def main(argv=None) -> int:
@@ -105,12 +105,15 @@ def _main(argv) -> int:
 
         return _run_interruptible(lambda: firmware_main(rest[1:] + global_options, prog="helmet-anc generate-firmware"))
     args = build_parser().parse_args(argv)
+    # Warnings about the inputs are shown when the command has run: a bad input then reads
+    # as its one error line, not as warnings about the same file followed by the error.
+    pending = []
     previous = warnings.showwarning
-    warnings.showwarning = _one_line_warning
+    warnings.showwarning = lambda message, *rest, **named: pending.append(_one_line(message))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always", RecordingWarning)
-            return args.handler(args)
+            status = args.handler(args)
     except HelmetAncError as exc:
         sys.stderr.write(f"helmet-anc {args.command}: error: {exc}\n")
         return EXIT_USAGE
@@ -119,6 +122,8 @@ def _main(argv) -> int:
         return EXIT_INTERRUPTED
     finally:
         warnings.showwarning = previous
+    sys.stderr.write("".join(pending))
+    return status
 
 
 def _run_interruptible(run) -> int:
