@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sysid.errors import HelmetAncError
-from sysid.identify import IDENTIFICATION_BAND
+from sysid.thresholds import IDENTIFICATION_BAND
 from sysid.model import Model
 
 __all__ = ["Uncertainty", "model_uncertainty", "DEFAULT_IN_BAND", "OUTSIDE_BAND", "LINEARISATION_LIMIT",

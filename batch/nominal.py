@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sysid.errors import HelmetAncError
-from sysid.identify import IDENTIFICATION_BAND
+from sysid.thresholds import IDENTIFICATION_BAND
 from sysid.model import Model
 from sysid.subspace import SubspaceDecomposition
 

@@ -39,12 +39,11 @@ from .output_error import block_data, refine_output_error
 from .recordings import Recording, RecordingFile, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
+from .thresholds import IDENTIFICATION_BAND, TRANSIENT_S
 from .uncertainty import frequency_response_band
 from .validation import VALIDATION_BAND, check_repeats, noise_floor, simulated_rms, sweep_spectrum
 
-__all__ = ["IdentificationOptions", "Identification", "identify", "IDENTIFICATION_BAND"]
-
-IDENTIFICATION_BAND = (20.0, 5000.0)
+__all__ = ["IdentificationOptions", "Identification", "identify"]
 
 
 @dataclass(frozen=True)
@@ -56,7 +55,7 @@ class IdentificationOptions:
     orders: tuple[int, ...] = DEFAULT_ORDERS
     band: tuple[float, float] = IDENTIFICATION_BAND
     validation_band: tuple[float, float] = VALIDATION_BAND
-    transient_s: float = 3.0
+    transient_s: float = TRANSIENT_S
     feedthrough: bool = False
     refine: bool = True
     scan_seconds: float = 1.0

@@ -32,6 +32,7 @@ from threadpoolctl import ThreadpoolController
 from . import lti
 from .errors import IdentificationError
 from .recordings import Recording
+from .thresholds import IDENTIFICATION_BAND
 
 # BLAS libraries found once at import (numpy's and scipy's are loaded by then); limiting
 # through it costs microseconds, threadpool_limits() rescans the process's libraries (4 ms).
@@ -52,7 +53,7 @@ class BlockData:
     fs: float
 
 
-def block_data(noise: Recording, band=(20.0, 5000.0), max_seconds: float | None = 10.0) -> BlockData:
+def block_data(noise: Recording, band=IDENTIFICATION_BAND, max_seconds: float | None = 10.0) -> BlockData:
     """The band's DFT bins of (at most max_seconds of) a noise recording after its transient."""
     n = noise.u.size if max_seconds is None else min(noise.u.size, int(round(max_seconds * noise.fs)))
     if n < 16:

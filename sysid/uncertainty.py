@@ -58,6 +58,7 @@ from .model import Model
 from .output_error import BlockData, _params_to_poles, _poles_to_params, _Problem, block_data, modal_basis
 from .recordings import Recording
 from .spectra import Spectra, response
+from .thresholds import IDENTIFICATION_BAND
 
 __all__ = ["UncertaintyBand", "frequency_response_band", "parameter_covariance", "delay_aligned_block", "NOISE_BINS", "MISFIT_BINS"]
 
@@ -250,7 +251,7 @@ def delay_aligned_block(noise: Recording, delay: int, band: tuple[float, float],
 
 
 def frequency_response_band(model: Model, noise: Recording, spectra: Spectra | None = None,
-                            band: tuple[float, float] = (20.0, 5000.0), seconds: float | None = 10.0) -> UncertaintyBand:
+                            band: tuple[float, float] = IDENTIFICATION_BAND, seconds: float | None = 10.0) -> UncertaintyBand:
     """The 95 % relative band of ``model``'s response from a noise recording and (optionally) its spectra.
 
     ``noise`` is the noise recording without its transient; the covariance uses its first

@@ -18,6 +18,7 @@ from ..findings import DiagnosisContext
 from ..grid import GridResult, grid_search
 from ..recordings import Recording, check_same_rate
 from ..spectra import Spectra, estimate_spectra
+from ..thresholds import IDENTIFICATION_BAND, TRANSIENT_S
 from ..validation import VALIDATION_BAND, sweep_spectrum
 
 __all__ = ["GRID_CHOICES", "MODEST_GAMMAS", "MODEST_ORDERS", "ReportData", "finding_dicts", "prepare_report_data"]
@@ -25,7 +26,6 @@ __all__ = ["GRID_CHOICES", "MODEST_GAMMAS", "MODEST_ORDERS", "ReportData", "find
 MODEST_GAMMAS = tuple(range(10, 1001, 90))
 MODEST_ORDERS = tuple(range(1, 13))
 GRID_CHOICES = ("modest", "skip")
-IDENTIFICATION_BAND = (20.0, 5000.0)
 
 
 @dataclass
@@ -43,7 +43,7 @@ class ReportData:
     grid_note: str
     gamma: int | None
     seed_model: object | None
-    transient_s: float = 3.0
+    transient_s: float = TRANSIENT_S
     notes: list[str] = field(default_factory=list)
 
 
@@ -59,7 +59,7 @@ def finding_dicts(findings) -> list[dict]:
 
 
 def prepare_report_data(model, noise: Recording, sweeps: list[Recording], identification=None, findings=None,
-                        grid: str = "modest", transient_s: float = 3.0) -> ReportData:
+                        grid: str = "modest", transient_s: float = TRANSIENT_S) -> ReportData:
     """Gather a report's data; see the module docstring for what is recomputed."""
     if grid not in GRID_CHOICES:
         raise HelmetAncError(f"grid must be one of {', '.join(GRID_CHOICES)}; found {grid!r}")

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import HelmetAncError
 from ..model import atomic_write_text
+from ..thresholds import TRANSIENT_S
 from . import diagnosis_figures as diag
 from . import identification_figures as ident
 from . import model_figures as modelfig
@@ -281,7 +282,7 @@ def render_report(data: ReportData, dpi: float = 100.0, title: str | None = None
 
 
 def write_report(path, model, noise, sweeps, identification=None, findings=None, *, dpi: float = 100.0,
-                 grid: str = "modest", transient_s: float = 3.0, extra_sections=()) -> Path:
+                 grid: str = "modest", transient_s: float = TRANSIENT_S, extra_sections=()) -> Path:
     """Write the HTML report of model on the recordings to path and return the file written.
 
     ``identification`` (an ``Identification``) supplies spectra, grid and seed model;

@@ -14,6 +14,7 @@ from matplotlib.ticker import MaxNLocator
 from ..recordings import Recording
 from ..spectra import Spectra, response, segment_length, smoothed_response
 from ..subspace import SubspaceDecomposition
+from ..thresholds import IDENTIFICATION_BAND, TRANSIENT_S
 from .signals import min_max_envelope
 from .style import COLORS, db, log_frequency_axis, new_figure, phase_on_branch
 
@@ -30,7 +31,7 @@ __all__ = [
 DEFAULT_SMOOTHING_WIDTHS = (10, 50, 200, 1000)
 
 
-def averaged_spectra_figure(noise: Recording, transient_s: float = 3.0, band=(20.0, 5000.0), dpi: float = 100.0):
+def averaged_spectra_figure(noise: Recording, transient_s: float = TRANSIENT_S, band=IDENTIFICATION_BAND, dpi: float = 100.0):
     """Seed figure 3.1: DFT of the whole noise recording vs the mean of its segment DFTs.
 
     Both are scaled by 1/length (the seed's convention), so the curves are amplitudes in
@@ -59,7 +60,7 @@ def averaged_spectra_figure(noise: Recording, transient_s: float = 3.0, band=(20
     return figure
 
 
-def smoothed_estimates_figure(spectra: Spectra, gammas=DEFAULT_SMOOTHING_WIDTHS, band=(20.0, 5000.0), dpi: float = 100.0):
+def smoothed_estimates_figure(spectra: Spectra, gammas=DEFAULT_SMOOTHING_WIDTHS, band=IDENTIFICATION_BAND, dpi: float = 100.0):
     """Seed figures 3.3/3.4: Bode plot of the non-smoothed FRF and smoothed ones for several gamma.
 
     The least smoothed (largest gamma) curve's phase is unwrapped; the other curves are
@@ -85,7 +86,7 @@ def smoothed_estimates_figure(spectra: Spectra, gammas=DEFAULT_SMOOTHING_WIDTHS,
     return figure
 
 
-def order_singular_values(spectra: Spectra, gammas=(10, 100, 1000), band=(20.0, 5000.0), q: int = 30) -> dict[int, np.ndarray]:
+def order_singular_values(spectra: Spectra, gammas=(10, 100, 1000), band=IDENTIFICATION_BAND, q: int = 30) -> dict[int, np.ndarray]:
     """Singular values of the subspace method (McKelvey et al. 1996, step 3) for each gamma.
 
     The same decomposition the grid search does, for a few smoothing widths only.

@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..spectra import Spectra, response, smoothed_response
+from ..thresholds import IDENTIFICATION_BAND, TRANSIENT_S
 from .style import COLORS, db, log_frequency_axis, new_figure, phase_on_branch
 
 __all__ = ["impulse_response", "impulse_response_figure", "model_bode_figure", "pole_zero_figure", "transient_decay_db"]
 
 
-def model_bode_figure(model, spectra: Spectra, gamma: int | None = None, band=(20.0, 5000.0),
+def model_bode_figure(model, spectra: Spectra, gamma: int | None = None, band=IDENTIFICATION_BAND,
                       seed_model=None, dpi: float = 100.0):
     """Seed figures 4.1/4.4: the model's Bode plot over the noisy and smoothed estimates.
 
@@ -121,7 +122,7 @@ def decay_label(decay_db: float) -> str:
     return f"{-decay_db:.0f} dB below its peak" if decay_db <= 0 else f"{decay_db:.0f} dB above its peak"
 
 
-def transient_decay_db(model, transient_s: float = 3.0, response: np.ndarray | None = None) -> float:
+def transient_decay_db(model, transient_s: float = TRANSIENT_S, response: np.ndarray | None = None) -> float:
     """Envelope of the impulse response at transient_s (s), in dB relative to its peak.
 
     The envelope is the largest |h| in the 10 ms ending at transient_s; the
@@ -137,7 +138,7 @@ def transient_decay_db(model, transient_s: float = 3.0, response: np.ndarray | N
     return float(db(np.max(np.abs(window)) / peak))
 
 
-def impulse_response_figure(model, transient_s: float = 3.0, short_ms: float = 5.0, dpi: float = 100.0):
+def impulse_response_figure(model, transient_s: float = TRANSIENT_S, short_ms: float = 5.0, dpi: float = 100.0):
     """Seed figures 4.3/4.6: short-term impulse response, and the long-term decay in dB.
 
     The long-term panel draws 20 log10 |h| relative to the peak up to 1.2 transient_s,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..spectra import Spectra, response
+from ..thresholds import IDENTIFICATION_BAND
 from .signals import instantaneous_frequency, min_max_envelope, worst_window
 from .style import COLORS, db, log_frequency_axis, new_figure
 
@@ -147,7 +148,7 @@ def residual_correlation_figure(comparison, dpi: float = 100.0):
     return figure
 
 
-def coherence_figure(spectra: Spectra, band=(20.0, 5000.0), dpi: float = 100.0):
+def coherence_figure(spectra: Spectra, band=IDENTIFICATION_BAND, dpi: float = 100.0):
     """Squared coherence of the noise recording and the H1/H2 ratio in dB.
 
     Coherence 1 means the ear signal is a linear function of the input; it drops with
