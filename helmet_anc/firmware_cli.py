@@ -83,12 +83,21 @@ def _main(argv, prog: str) -> int:
         return 2
     if args.controller is not None:
         return _controller(parser, args, argv)
+    manifest = _generate(parser, lambda: generate_firmware(
+        args.model, args.output, name=args.name, variant=args.variant, fs=args.fs, target=args.target,
+        min_snr=args.min_snr, allow_unstable=args.allow_unstable, sweeps=args.sweep if args.verify else None,
+        order=args.order, scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser,
+        force=args.force, progress=None if args.quiet else terminal_progress()))
+    if isinstance(manifest, int):
+        return manifest
+    print(format_verification_table(manifest))
+    return 0
+
+
+def _generate(parser, run):
+    """``run()``'s manifest, after saying what it wrote; or the exit status of its one-line error."""
     try:
-        manifest = generate_firmware(args.model, args.output, name=args.name, variant=args.variant, fs=args.fs,
-                                     target=args.target, min_snr=args.min_snr, allow_unstable=args.allow_unstable,
-                                     sweeps=args.sweep if args.verify else None, order=args.order,
-                                     scaling=args.scaling, headroom_db=args.headroom, quantiser=args.quantiser,
-                                     force=args.force, progress=None if args.quiet else terminal_progress())
+        manifest = run()
     except KeyboardInterrupt:
         # Every file is written by rename (sysid.files): an interrupt leaves no partial output.
         print(f"{parser.prog}: interrupted; no partial output left", file=sys.stderr)
@@ -98,8 +107,7 @@ def _main(argv, prog: str) -> int:
         print(f"{parser.prog}: error: {message}", file=sys.stderr)
         return 2
     print(f"wrote {', '.join(str(p) for p in manifest.files)} and {manifest.outdir / 'manifest.json'}")
-    print(format_verification_table(manifest))
-    return 0
+    return manifest
 
 
 def _controller(parser, args, argv) -> int:
@@ -118,19 +126,11 @@ def _controller(parser, args, argv) -> int:
         print(f"{parser.prog}: error: {', '.join(unused)} not used with --controller (the filters run at the "
               "controller's rate under fixed names)", file=sys.stderr)
         return 2
-    try:
-        manifest = generate_controller_firmware(args.controller, args.output, variant=args.variant,
-                                                min_snr=30.0 if min_snr is None else min_snr,
-                                                quantiser=args.quantiser, force=args.force,
-                                                progress=None if args.quiet else terminal_progress())
-    except KeyboardInterrupt:
-        print(f"{parser.prog}: interrupted; no partial output left", file=sys.stderr)
-        return 130
-    except (CodegenError, ValueError) as exc:
-        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"{parser.prog}: error: {message}", file=sys.stderr)
-        return 2
-    print(f"wrote {', '.join(str(p) for p in manifest.files)} and {manifest.outdir / 'manifest.json'}")
+    manifest = _generate(parser, lambda: generate_controller_firmware(
+        args.controller, args.output, variant=args.variant, min_snr=30.0 if min_snr is None else min_snr,
+        quantiser=args.quantiser, force=args.force, progress=None if args.quiet else terminal_progress()))
+    if isinstance(manifest, int):
+        return manifest
     print(f"worst-case headroom (latency {manifest.data['controller']['latency_samples']} samples):")
     print(format_headroom_table(manifest.data["headroom"]))
     return 0
