@@ -71,20 +71,15 @@ def check_workflow(session, path, kinds, drawn):
         assert auto.after.ratio <= AT_FLOOR, text
 
 
-# The default run: a representative handful on the appendix-A plants, self-identified.
-# Two are known defects of identification on such data, kept visible as strict expected failures:
-# on the clipped FB session identify stops at order 3 (the seed plant has 7) and more order from
-# there ends at 3.2x; on the drifting-clock session the refit on the resampled ear channel comes out
-# worse (26x -> 35x, a spare pole at |z| = 1 - 1e-9), so the clock correction is rejected.
-IDENTIFY_ON_BAD_DATA = pytest.mark.xfail(strict=True, reason="identification on clipped or drifting data "
-                                         "(see the comment above HANDFUL)")
-HANDFUL = [("ff", 21, ("delay",)), pytest.param("fb", 22, ("clipping",), marks=IDENTIFY_ON_BAD_DATA),
-           ("ff", 23, ("dc-offset",)), ("ff", 24, ("input-nonlinearity",)),
-           pytest.param("ff", 25, ("clock-drift", "periodic-disturbance"), marks=IDENTIFY_ON_BAD_DATA)]
+# The default run: a representative handful on the appendix-A plants, self-identified. On the clipped
+# FB session identify alone stops at order 3 (the seed plant has 7), and on the drifting-clock session
+# at a delay the drift smeared: the corrections' refits identify anew on the corrected data.
+HANDFUL = [("ff", 21, ("delay",)), ("fb", 22, ("clipping",)), ("ff", 23, ("dc-offset",)),
+           ("ff", 24, ("input-nonlinearity",)), ("ff", 25, ("clock-drift", "periodic-disturbance"))]
 
 
 @pytest.mark.parametrize("path, seed, kinds", HANDFUL,
-                         ids=["+".join((h.values if hasattr(h, "values") else h)[2]) for h in HANDFUL])
+                         ids=["+".join(h[2]) for h in HANDFUL])
 def test_effect_in_the_self_identified_workflow(path, seed, kinds):
     rng = np.random.default_rng(seed)
     drawn = [random_effect(kind, rng) for kind in kinds]
