@@ -211,9 +211,11 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     retried: set[str] = set()
     tried: set[str] = set()
     stop_reason = f"step limit ({max_steps} steps)"
+    diagnosis = None  # of the current model: a rejected step leaves the model, so its diagnosis, as it was
     while len(steps) < max_steps:
         at_floor = current.ratio <= AT_FLOOR
-        diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
+        if diagnosis is None:
+            diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
         auto_effects, corrections = _auto_effects(), _corrections()
         unmodellable = [f["effect"] for f in diagnosis.significant if f["effect"] not in auto_effects]
         accepted = sum(1 for step in steps if step.accepted)
@@ -278,6 +280,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             model = result.model
             model.history[-1] = step.to_dict()
             current = result.after
+            diagnosis = None
     else:
         if current.ratio <= AT_FLOOR:
             stop_reason = "at the floor"

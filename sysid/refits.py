@@ -30,7 +30,10 @@ Each builder ``add_X(model, noise, sweeps, params, options, transient_s)`` retur
   the order and delay chosen on clipped or drifting data are no bound. Excluded stretches
   are filled with the prediction of the model before (``_prepared``), in passes (EM).
 
-Every other re-identification fits the core behind the model's own delay and input map.
+Every other re-identification fits the core behind the model's own delay and input map, and
+runs only when the warm start (``_warm``: the current core, its order, poles and zeros, refined
+by output error behind the new structure) and the structure with the core kept do not reach
+the noise floor (``_refit``): the re-identification's grid and order search are most of a step's time.
 """
 
 from __future__ import annotations
@@ -49,8 +52,10 @@ from .identify import IdentificationOptions, identify
 from .model import Model
 from .output_error import block_data, refine_output_error
 from .recordings import Recording
+from .spectra import estimate_spectra
 from .structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
 from .thresholds import AT_FLOOR, IDENTIFICATION_BAND, RUN_TO_RUN_MIN
+from .uncertainty import frequency_response_band
 
 __all__ = ["REFIT_OPTIONS", "add_delay", "add_input_nonlinearity", "add_periodic_disturbance", "series_factor",
            "add_resonance", "add_highpass", "add_lowpass", "add_mode", "add_order", "add_input_noise", "add_dc_offset",
@@ -133,23 +138,57 @@ def _core(m: Model):
     return m.A, m.B, m.C, m.D
 
 
+def _warm(trial: Model, noise, options, transient_s) -> Model:
+    """The trial's core (the current model's order, poles and zeros) refined by output error behind the
+    trial's new structure (its delay, input polynomial, disturbance): the warm start of a refit."""
+    seconds = (options or REFIT_OPTIONS).refine_seconds
+    body = _core_body(trial, noise, transient_s)
+    oe = refine_output_error(trial.A, trial.B, trial.C, trial.D, block_data(body, IDENTIFICATION_BAND, seconds),
+                             delay=trial.delay, feedthrough=bool(trial.D[0, 0]))
+    warm = _with(trial, (oe.A, oe.B, oe.C, oe.D))
+    if warm.stable:
+        # The refined core's own 95 % band, as identify gives a fresh core (a band belongs to its fit).
+        warm.uncertainty = frequency_response_band(warm, body, estimate_spectra(body, "h1"), IDENTIFICATION_BAND,
+                                                   seconds).to_dict()
+    return warm
+
+
+def _refit(sweeps, trials: list[Model], reidentify) -> Model:
+    """The stable model of lowest validation rms among ``trials`` (warm starts and the structure with
+    the core kept), and ``reidentify()`` (a fresh identification behind the structure, the costly part:
+    an order and grid search) only when none of them reaches the noise floor."""
+    scored = sorted(((c.rms, c.ratio, k) for k, t in enumerate(trials) if t.stable
+                     for c in [compare(t, sweeps)]), key=lambda x: x[0])
+    if scored and scored[0][1] <= AT_FLOOR:
+        return trials[scored[0][2]]
+    fresh = reidentify()
+    if not fresh.stable:
+        return trials[scored[0][2]] if scored else fresh
+    return fresh if not scored or compare(fresh, sweeps).rms < scored[0][0] else trials[scored[0][2]]
+
+
 def add_delay(model, noise, sweeps, params, options, transient_s):
     # The scan sees the onset of the response; a core without feedthrough starts one sample
     # later, so the delay one sample shorter is tried too and the better validation kept.
-    best = None
-    for total in sorted({model.delay + params["samples"], max(model.delay + params["samples"] - 1, model.delay)}):
-        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), total),
-                           model.disturbance_frequencies, options, transient_s)
-        trial = _with(model, _core(core), uncertainty=core.uncertainty,
-                      delay=total + core.delay, identification=dict(core.identification))
-        if not trial.stable:
-            continue
-        rms = compare(trial, sweeps).rms
-        if best is None or rms < best[0]:
-            best = (rms, trial, trial.delay)
-    if best is None:
+    # Warm starts behind both delays first; re-identifications only when neither reaches the floor.
+    totals = sorted({model.delay + params["samples"], max(model.delay + params["samples"] - 1, model.delay)})
+    warm = [t for t in (_warm(_with(model, _core(model), delay=total), noise, options, transient_s) for total in totals)
+            if t.stable]
+
+    def reidentify():
+        fresh = []
+        for total in totals:
+            core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), total),
+                               model.disturbance_frequencies, options, transient_s)
+            fresh.append(_with(model, _core(core), uncertainty=core.uncertainty,
+                               delay=total + core.delay, identification=dict(core.identification)))
+        stable = [t for t in fresh if t.stable]
+        return min(stable, key=lambda t: compare(t, sweeps).rms) if stable else fresh[0]
+
+    best = _refit(sweeps, warm, reidentify)
+    if not best.stable:
         raise IdentificationError(f"refining with delay {model.delay + params['samples']} gave no stable model")
-    return best[1], {"total_samples": best[2]}
+    return best, {"total_samples": best.delay}
 
 
 def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
@@ -161,30 +200,26 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     added = [0.0, found["a2"], found["a3"] if params["degree"] >= 3 else 0.0]
     coefficients = [float(a + b) for a, b in zip(previous + [0.0] * (3 - len(previous)), added)] + previous[3:]
     trial = _with(model, _core(model), input_nonlinearity=coefficients)
-    core = _reidentify(model, noise, sweeps, lambda u: _shift(trial.apply_input_nonlinearity(u), model.delay),
-                       model.disturbance_frequencies, options, transient_s)
-    return (_with(model, _core(core), uncertainty=core.uncertainty,
-                  delay=model.delay + core.delay, input_nonlinearity=coefficients,
-                  identification=dict(core.identification)), {"coefficients": coefficients})
+
+    def reidentify():
+        core = _reidentify(model, noise, sweeps, lambda u: _shift(trial.apply_input_nonlinearity(u), model.delay),
+                           model.disturbance_frequencies, options, transient_s)
+        return _with(model, _core(core), uncertainty=core.uncertainty, delay=model.delay + core.delay,
+                     input_nonlinearity=coefficients, identification=dict(core.identification))
+    return _refit(sweeps, [_warm(trial, noise, options, transient_s)], reidentify), {"coefficients": coefficients}
 
 
 def add_periodic_disturbance(model, noise, sweeps, params, options, transient_s):
     frequencies = sorted(set((model.disturbance_frequencies or []) + list(params["frequencies_hz"])))
-    core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
-                       frequencies, options, transient_s)
-    refit = _with(model, _core(core), uncertainty=core.uncertainty,
-                  delay=model.delay + core.delay, disturbance_frequencies=frequencies,
-                  identification=dict(core.identification))
-    return _better(sweeps, _with(model, _core(model), disturbance_frequencies=frequencies), refit), \
-        {"frequencies_hz": frequencies}
+    kept = _with(model, _core(model), disturbance_frequencies=frequencies)
 
-
-def _better(sweeps, kept: Model, refit: Model) -> Model:
-    """Of the model with the core kept as it is and the re-identified one, the stable one with the lower
-    validation rms: a correction or disturbance model that keeps the core can only lower the error, so
-    the step never makes the model worse than the structure alone does."""
-    trials = [m for m in (kept, refit) if m.stable] or [kept]
-    return min(trials, key=lambda m: compare(m, sweeps).rms)
+    def reidentify():
+        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
+                           frequencies, options, transient_s)
+        return _with(model, _core(core), uncertainty=core.uncertainty, delay=model.delay + core.delay,
+                     disturbance_frequencies=frequencies, identification=dict(core.identification))
+    # The core kept is among the trials: a disturbance model that keeps the core can only lower the error.
+    return _refit(sweeps, [kept, _warm(kept, noise, options, transient_s)], reidentify), {"frequencies_hz": frequencies}
 
 
 def add_order(model, noise, sweeps, params, options, transient_s):
@@ -195,11 +230,13 @@ def add_order(model, noise, sweeps, params, options, transient_s):
     if extra % 2:
         blocks.append(np.array([[0.9]]))
     grown = _grown(model, data, blocks)
-    core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
-                       model.disturbance_frequencies, options, transient_s, extra_order=extra)
-    fresh = _with(model, _core(core), uncertainty=core.uncertainty,
-                  delay=model.delay + core.delay, identification=dict(core.identification))
-    best = min([t for t in (grown, fresh) if t.stable] or [grown], key=lambda t: compare(t, sweeps).rms)
+
+    def reidentify():
+        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
+                           model.disturbance_frequencies, options, transient_s, extra_order=extra)
+        return _with(model, _core(core), uncertainty=core.uncertainty,
+                     delay=model.delay + core.delay, identification=dict(core.identification))
+    best = _refit(sweeps, [grown], reidentify)
     return best, {"order": best.order}
 
 
@@ -210,11 +247,15 @@ def _grown(model, data, blocks) -> Model:
     return _with(model, (oe.A, oe.B, oe.C, oe.D))
 
 
-def _output_error_data(model, noise, transient_s, seconds):
+def _core_body(model, noise, transient_s) -> Recording:
+    """The noise recording after its transient as the model's core sees it (``_transformed``, delay not applied)."""
     body = _prepared(model, noise).trimmed(transient_s)
     y = body.y - model.output_offset - _disturbance(model, body, model.disturbance_frequencies)
-    return block_data(Recording(model.apply_input_nonlinearity(body.u), y, body.fs, body.path), IDENTIFICATION_BAND,
-                      seconds)
+    return Recording(model.apply_input_nonlinearity(body.u), y, body.fs, body.path)
+
+
+def _output_error_data(model, noise, transient_s, seconds):
+    return block_data(_core_body(model, noise, transient_s), IDENTIFICATION_BAND, seconds)
 
 
 def series_factor(coefficients):
@@ -309,7 +350,7 @@ def add_clock_drift(model, noise, sweeps, params, options, transient_s):
     # identified anew on the corrected recordings (the old one fitted the drift's smeared delay).
     ratio = model.clock_ratio * (1.0 + params["ppm"] * 1e-6)
     trial = _with(model, _core(model), clock_ratio=ratio)
-    return _better(sweeps, trial, _fresh(trial, noise, sweeps, options, transient_s)), {"clock_ratio": ratio}
+    return _refit(sweeps, [trial], lambda: _fresh(trial, noise, sweeps, options, transient_s)), {"clock_ratio": ratio}
 
 
 # Passes of add_clipping's refit: each fills the excluded stretches with the last model's prediction.
