@@ -31,7 +31,7 @@ import numpy as np
 from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
 from .recordings import Recording, check_same_rate
-from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor
+from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag
 
 __all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "fit_sinusoids", "LAGS", "BOUND_99"]
 
@@ -148,7 +148,9 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     if fs != model.fs:
         raise IdentificationError(f"model sample rate {model.fs:g} Hz differs from the sweeps' {fs:g} Hz")
     model.check_stable()
-    check_repeats(*sweeps)
+    # The repeats' alignment depends on their inputs only: found once for both uses.
+    lag = repeat_lag(*sweeps)
+    check_repeats(*sweeps, lag=lag)
     first = int(round(SKIP_S * fs))
     per_sweep = []
     cleaned = []
@@ -179,7 +181,7 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     centred = np.concatenate(measured)
     fit_percent = float(100.0 * (1.0 - np.linalg.norm(np.concatenate(tails)) / np.linalg.norm(centred - centred.mean())))
     # The excluded samples hold no noise in the repeat difference: scale to the kept samples.
-    floor = noise_floor(cleaned[0], cleaned[1], band) / np.sqrt(max(min(kept), 1e-6))
+    floor = noise_floor(cleaned[0], cleaned[1], band, lag=lag) / np.sqrt(max(min(kept), 1e-6))
 
     bands = _band_table(tails, cleaned, fs, first)
     lag_axis = np.arange(lags)

@@ -27,7 +27,7 @@ from .errors import IdentificationError
 from .recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
-           "noise_floor", "check_repeats", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
+           "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
 VALIDATION_BAND = (20.0, 4000.0)
@@ -125,13 +125,20 @@ def _align(reference: np.ndarray, other: np.ndarray) -> int:
     return lag if lag < size // 2 else lag - size
 
 
-def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S) -> float:
+def repeat_lag(sweep1: Recording, sweep2: Recording) -> int:
+    """Lag (samples) that aligns the second repeat to the first, on their input channels."""
+    return _align(sweep1.u, sweep2.u)
+
+
+def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S,
+                lag: int | None = None) -> float:
     """Output-noise RMS in band (FS) from two recordings of the same excitation.
 
-    The repeats are aligned on their input channels; the ear signals' difference then
-    holds the output noise of both, so the floor is rms(y1 - y2) / sqrt(2).
+    The repeats are aligned on their input channels (``repeat_lag``, or the ``lag`` given);
+    the ear signals' difference then holds the output noise of both, so the floor is
+    rms(y1 - y2) / sqrt(2).
     """
-    lag = _align(sweep1.u, sweep2.u)
+    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
     y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
     first = int(round(skip_s * sweep1.fs))
     n = min(y1.size, y2.size)
@@ -141,7 +148,7 @@ def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip
     return band_rms(difference, sweep1.fs, band) / np.sqrt(2.0)
 
 
-def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S) -> None:
+def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, lag: int | None = None) -> None:
     """IdentificationError when the two sweeps cannot give a noise floor: sample-identical ear signals.
 
     The floor is the difference of two repeats (``noise_floor``); the same file given
@@ -149,7 +156,7 @@ def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S) 
     infinite and every band "above the noise floor". No other estimate of the output
     noise exists in the sweeps, so this is an error rather than a warning.
     """
-    lag = _align(sweep1.u, sweep2.u)
+    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
     y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
     first = int(round(skip_s * sweep1.fs))
     n = min(y1.size, y2.size)

@@ -98,7 +98,9 @@ def clipping_finding(ctx: DiagnosisContext) -> dict:
             fractions[f"{recording.path}:{label}"] = clipping.fraction
             if clipping.fraction > worst:
                 worst, where, levels = clipping.fraction, f"{label} channel of {recording.path}", clipping.levels
-        spans, _ = clipped_stretches_of(recording)
+        # The stretches come from the same masks: a recording without a clipped sample has none.
+        spans = clipped_stretches_of(recording)[0] if any(
+            fractions[f"{recording.path}:{label}"] > 0 for label in ("input", "ear")) else []
         if spans:
             excluded[recording_key(recording)] = spans
     already = bool(ctx.model.excluded) and all(ctx.model.excluded.get(k) for k in excluded)
