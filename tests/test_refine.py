@@ -1,6 +1,7 @@
 """refine: the added structure brings the validation error to the noise floor and survives JSON."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -235,3 +236,31 @@ def test_auto_is_monotone_bounded_and_says_why_it_stopped(effects):
     assert auto.after.ratio <= 1.2, text
     assert [h["effect"] for h in auto.model.history] == [s.effect for s in kept]
     assert f"stopped: {auto.stop_reason}" in text
+
+
+def test_excluded_stretches_are_filled_with_the_models_prediction():
+    # Identification on a model with excluded stretches sees the model's own prediction there
+    # (missing data), the measured samples everywhere else; nothing is cut out.
+    from sysid.corrections import excluded_mask
+    from sysid.refits import _prepared
+    session, model = effect_case("ff", 5, ())
+    sweep = session.sweeps[0]
+    excluded = {Path(sweep.path).name: [[0.5, 0.6], [1.0, 1.01]]}
+    trial = Model(**{**model.__dict__, "excluded": excluded})
+    prepared = _prepared(trial, sweep)
+    mask = excluded_mask(sweep, excluded)
+    assert prepared.y.size == sweep.y.size and mask.sum() == round(0.11 * sweep.fs)
+    assert np.array_equal(prepared.y[~mask], sweep.y[~mask])
+    assert np.allclose(prepared.y[mask], model.simulate(sweep.u)[mask])
+
+
+def test_a_refit_whose_warm_start_reaches_the_floor_skips_the_re_identification():
+    from sysid.refits import _refit
+    session, model = effect_case("ff", 5, ())
+    assert compare(model, session.sweeps).ratio <= 1.2
+
+    def reidentify():
+        raise AssertionError("re-identified although a trial was at the floor")
+    assert _refit(session.sweeps, [model], reidentify) is model
+    worse = Model(**{**model.__dict__, "delay": model.delay + 5})
+    assert _refit(session.sweeps, [worse], lambda: model) is model
