@@ -161,7 +161,14 @@ def _refit(sweeps, trials: list[Model], reidentify) -> Model:
                      for c in [compare(t, sweeps)]), key=lambda x: x[0])
     if scored and scored[0][1] <= AT_FLOOR:
         return trials[scored[0][2]]
-    fresh = reidentify()
+    try:
+        fresh = reidentify()
+    except IdentificationError:
+        # No stable model in the re-identification's grid (orders bounded around the model's):
+        # the warm start still stands.
+        if not scored:
+            raise
+        return trials[scored[0][2]]
     if not fresh.stable:
         return trials[scored[0][2]] if scored else fresh
     return fresh if not scored or compare(fresh, sweeps).rms < scored[0][0] else trials[scored[0][2]]
