@@ -54,7 +54,8 @@ def _cdef(name: str, header: str) -> str:
     for kind in ("f32", "q15"):
         if f"{name}_{kind}_state;" in header:
             lines.append(f"typedef struct {{ ...; }} {name}_{kind}_state;")
-    prototypes = re.findall(rf"^void {name}_(?:f32|q15)_\w+\([^)]*\);", header, flags=re.MULTILINE)
+    prototypes = re.findall(rf"^(?:void|int16_t|float) {name}_(?:f32|q15)_\w+\([^)]*\);", header,
+                            flags=re.MULTILINE)
     return "\n".join(lines + prototypes)
 
 

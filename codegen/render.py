@@ -145,9 +145,10 @@ def _fixed_sections(design: FixedDesign) -> list[dict]:
             "quad": [{**_fixed_step(section, quantiser, x, y, out), "offset": offset}
                      for offset, (x, y, out) in enumerate(roles)],
             "tail": _fixed_step(section, quantiser, ("x0", "x1", "x2"), ("y1", "y2"), "y0"),
-            # The short-block path: one sample through every section, the states read and written in place.
+            # The short-block and per-sample path: one sample through every section; the input history x1, x2
+            # is the previous section's output history (the template keeps it in registers).
             "single": _fixed_step(section, f"(int64_t)s->e[{k}]" if design.quantiser == "efb" else quantiser,
-                                  ("v", f"s->x[{k}][0]", f"s->x[{k}][1]"), (f"s->y[{k}][0]", f"s->y[{k}][1]"), "out"),
+                                  ("v", "x1", "x2"), ("y1", "y2"), "out"),
             "bits": 32 - section.guard,
             "unit": str(1 << section.guard),
         })

@@ -39,7 +39,19 @@ static int16_t anc_sat16(int32_t v)
 {
     return (int16_t)((v > 32767) ? 32767 : ((v < -32768) ? -32768 : v));
 }
+#if ANC_B < 4
+/* Blocks shorter than the filters' four-sample section loops: one step call per frame
+ * (process() would run the same per-sample kernel behind its block and chunk bookkeeping). */
+#define ANC_PROCESS(filter, state, in, out)                  \
+    do {                                                     \
+        size_t j_;                                           \
+        for (j_ = 0; j_ < ANC_B; ++j_) {                     \
+            (out)[j_] = filter##_q15_step(state, (in)[j_]);  \
+        }                                                    \
+    } while (0)
+#else
 #define ANC_PROCESS(filter, state, in, out) filter##_q15_process(state, in, out, ANC_B)
+#endif
 #define ANC_RESET(filter, state) filter##_q15_reset(state)
 #endif
 
