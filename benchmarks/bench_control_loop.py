@@ -5,7 +5,8 @@ The controller is designed by ``anc.design`` on the seed (Appendix A) plants for
 per-sample path's latency (2 samples) and run on the true FB plant with the default
 wind/engine disturbance. Instruction counts come from a QEMU execution trace
 (``codegen.qemu_cost``): a driver calls the codec interrupt handler
-``anc_control_dma_done`` (and, separately, each filter's ``process`` on one sample) for
+``anc_control_dma_done`` (and, separately, each filter on one sample per call: ``step``
+for Q15, ``process`` for float32, as the per-sample path calls them) for
 two numbers of frames; the difference of the counts over the difference of the frames is
 the cost per sample, call overhead included (the handler is called once per frame).
 
@@ -34,7 +35,8 @@ from anc.disturbance import default_disturbance, synthesize  # noqa: E402
 from anc.prediction import band_centres  # noqa: E402
 from codegen.control_loop import board_loop  # noqa: E402
 from codegen.controller import generate_controller_firmware, plan_controller  # noqa: E402
-from codegen.qemu_cost import M4_CFLAGS, build_m4_elf, count_regions, per_sample_cost  # noqa: E402
+from codegen.qemu_cost import (M4_CFLAGS, build_m4_elf, count_regions, per_sample_cost,  # noqa: E402
+                               per_sample_function_cost)
 from codegen.reference import to_q15  # noqa: E402
 from sysid.plants import appendix_a_model  # noqa: E402
 
@@ -76,7 +78,8 @@ FILTER_RUN(ctl_s, ctl_s_f32_state)
 FILTER_RUN(ctl_q, ctl_q_f32_state)
 FILTER_RUN(ctl_w, ctl_w_f32_state)
 #else
-#define PROCESS(filter, s, i, o, n) filter##_q15_process(s, i, o, n)
+/* The per-sample path's call: step (one sample, no block bookkeeping). */
+#define PROCESS(filter, s, i, o, n) ((o)[0] = filter##_q15_step(s, (i)[0]))
 FILTER_RUN(ctl_s, ctl_s_q15_state)
 FILTER_RUN(ctl_q, ctl_q_q15_state)
 FILTER_RUN(ctl_w, ctl_w_q15_state)
@@ -171,12 +174,15 @@ def instruction_counts(root: Path) -> dict:
             sources = [work / "driver.c", FIRMWARE / "anc_control.c", *sorted((root / folder).glob("ctl_*_filter.c"))]
             elf = build_m4_elf(sources, work, include_dirs=(root / folder,),
                                cflags=(*M4_CFLAGS, *flags, f"-DANC_CONTROL_BLOCK={block}u"))
-            counts = count_regions(elf)
+            counts = count_regions(elf, functions=("anc_control_dma_done",))
             if block == 1:
                 names = ["control path, per sample (latency 2)", "ctl_s (internal model), one sample per call",
                          "ctl_q (Q), one sample per call", "ctl_w (W), one sample per call"]
                 result.setdefault(variant, {}).update(
                     {name: per_sample_cost(counts, SHORT, LONG, first=2 * i) for i, name in enumerate(names)})
+                # The handler's own instructions (d_hat, delay lines, drive sum, limiter), filters excluded.
+                result[variant]["anc_control_dma_done itself (d_hat, delays, limiter)"] = per_sample_function_cost(
+                    counts, "anc_control_dma_done", SHORT, LONG)
             else:
                 result[variant]["control path, blocks of 4 frames (latency 8)"] = per_sample_cost(counts, SHORT, LONG)
     return result
@@ -218,7 +224,9 @@ def render(loops: dict, costs: dict, seconds: float) -> str:
     lines += ["Instructions per sample on the emulated Cortex-M4 (QEMU trace, `codegen.qemu_cost`; "
               f"{LONG - SHORT} frames; `arm-none-eabi-gcc -O2`), against the budget of {BUDGET_CYCLES} cycles "
               "per sample (168 MHz, 48 kHz). Instructions are not cycles: loads take 2 cycles and taken branches "
-              "2-4 on a Cortex-M4, so the cycle count is higher than these figures.", "",
+              "2-4 on a Cortex-M4, so the cycle count is higher than these figures. The filters' rows call each "
+              "filter as the per-sample path does: `NAME_q15_step` (Q15), `NAME_f32_process` on one sample "
+              "(float32).", "",
               "| per sample | Q15 | float32 |", "|---|---|---|"]
     for name in costs["q15"]:
         q, f = costs["q15"][name], costs["float"][name]

@@ -94,6 +94,12 @@ class HostFilter:
         """Run int16 samples through NAME_q15_process (state carries over between calls)."""
         return self._run("q15", x, np.int16, "int16_t")
 
+    def step_q15(self, x: np.ndarray) -> np.ndarray:
+        """Run int16 samples through NAME_q15_step, one call per sample (state carries over, shared
+        with process_q15)."""
+        step, state = getattr(self._lib, f"{self.name}_q15_step"), self._states["q15"]
+        return np.array([step(state, int(v)) for v in np.asarray(x, dtype=np.int16)], dtype=np.int16)
+
     def process_f32(self, x: np.ndarray) -> np.ndarray:
         """Run float32 samples through NAME_f32_process (state carries over between calls)."""
         return self._run("f32", x, np.float32, "float")

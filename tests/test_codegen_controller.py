@@ -117,6 +117,35 @@ def test_worst_case_input_saturates_never_wraps(generated, plan, part):
         assert out[h.size - 1] == 32767
 
 
+@pytest.mark.parametrize("part", ["model", "fb", "ff"])
+def test_step_kernel_bit_exact_on_worst_case_inputs(generated, plan, part):
+    """NAME_q15_step (the per-sample path's kernel) on the L1-attaining full-scale input, its
+    negation and a full-scale square wave, alternating with process() blocks of 1, 4 and 37 samples
+    on the same state (the two paths share it: section k's input history is section k - 1's
+    output history): word for word the saturating reference."""
+    name = FILTER_NAMES[part]
+    folder = generated.outdir
+    host = build_host(name, (folder / f"{name}_filter.h").read_text(), (folder / f"{name}_filter.c").read_text())
+    r = plan.plans[part].realisation
+    impulse = np.zeros(3000)
+    impulse[0] = 1.0
+    h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
+    worst = np.where(h[::-1] >= 0, 32767, -32768).astype(np.int16)
+    square = np.where((np.arange(3000) // 40) % 2 == 0, 32767, -32768).astype(np.int16)
+    x = np.concatenate((worst, (-worst.astype(np.int32)).clip(-32768, 32767).astype(np.int16), square))
+    pieces, start, k = [], 0, 0
+    while start < x.size:
+        stop = min(x.size, start + (300, 1, 300, 4, 300, 37)[k % 6])
+        run = host.step_q15 if k % 2 == 0 else host.process_q15
+        pieces.append(run(x[start:stop]))
+        start, k = stop, k + 1
+    out = np.concatenate(pieces)
+    expected = fixed_reference(plan.fixed(part), x)
+    np.testing.assert_array_equal(out, expected)
+    if part == "model":
+        assert expected.max() == 32767  # the internal model's output saturates on this input
+
+
 def test_refusals(controller, tmp_path):
     with pytest.raises(CodegenError, match="latency_samples 1 is below the board's 2-sample control path"):
         plan_controller(_edited(controller, latency_samples=1))
