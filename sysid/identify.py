@@ -45,6 +45,10 @@ from .validation import VALIDATION_BAND, check_repeats, noise_floor, simulated_r
 
 __all__ = ["IdentificationOptions", "Identification", "identify"]
 
+# Lower orders refitted behind a delay moved by latency.refine_delay (their poles need not imitate it).
+_FREED_ORDERS = 2
+_FREED_RADIUS_MARGIN = 1e-6
+
 
 @dataclass(frozen=True)
 class IdentificationOptions:
@@ -212,6 +216,20 @@ def _decompositions(spectra: Spectra, grid: GridResult, band, feedthrough: bool,
     return decompositions, grid_gammas
 
 
+def _without_freed_pole(poles: np.ndarray, band: tuple[float, float], fs: float) -> np.ndarray | None:
+    """The poles without the one (or conjugate pair) nearest the unit circle among those whose frequency
+    angle(p) fs / 2 pi (Hz) lies outside ``band``; None when every pole is in band."""
+    frequency = np.abs(np.angle(poles)) * fs / (2 * np.pi)
+    outside = np.flatnonzero((frequency < band[0]) | (frequency > band[1]))
+    if outside.size == 0 or poles.size < 2:
+        return None
+    worst = poles[outside[np.argmax(np.abs(poles[outside]))]]
+    keep = np.abs(poles - worst) > 1e-12
+    if abs(worst.imag) > 0:
+        keep &= np.abs(poles - np.conj(worst)) > 1e-12
+    return poles[keep]
+
+
 def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress):
     scan_block = block_data(body, options.band, options.scan_seconds)
     # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
@@ -237,13 +255,33 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
         if extra:
             longer = compensate_delay(body, extra)
             longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
-            # The same poles behind the longer delay: refit on the scan block (numerator and poles).
-            fit = refine_output_error(pick.A, pick.B, pick.C, pick.D, block_data(longer, options.band, options.scan_seconds),
-                                      feedthrough=options.feedthrough, max_iterations=20)
-            moved = OrderCandidate(pick.order, pick.start, sweep_rms(fit.A, fit.B, fit.C, fit.D, longer_sweeps),
-                                   fit.A, fit.B, fit.C, fit.D, pick.reflected)
-            moved_rms = time_rms(moved, delay + extra)
-            if moved.rms <= pick.rms * (1 + options.min_gain) and moved_rms <= pick_rms * (1 + options.min_gain):
+            # The same poles behind the longer delay, refitted on the scan block (numerator and poles); and the
+            # next lower orders' poles: the samples now in the delay line free the poles that imitated them, and
+            # a freed pole, out of the band the fit sees, can drift to z = 1 (sweeps' spectra right, simulation not).
+            scan_longer = block_data(longer, options.band, options.scan_seconds)
+            moved, moved_rms = None, np.inf
+            # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
+            # _FREED_ORDERS poles, one at a time, below.
+            starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
+                      for c in [pick, *[c for c in candidates if pick.order - _FREED_ORDERS <= c.order < pick.order]]]
+            while starts:
+                drops, label, A0, B0, C0, D0, reflected = starts.pop(0)
+                fit = refine_output_error(A0, B0, C0, D0, scan_longer, feedthrough=options.feedthrough, max_iterations=20)
+                trial = OrderCandidate(fit.A.shape[0], label, sweep_rms(fit.A, fit.B, fit.C, fit.D, longer_sweeps),
+                                       fit.A, fit.B, fit.C, fit.D, reflected)
+                trial_rms = time_rms(trial, delay + extra)
+                if trial.rms <= pick.rms * (1 + options.min_gain) and trial_rms < moved_rms:
+                    moved, moved_rms = trial, trial_rms
+                # A pole at the parametrisation's margin (|p| = 1 - 1e-9) is a freed pole run to z = 1, not a
+                # coupling high-pass (a 5 Hz corner at 48 kHz is |p| = 0.9993).
+                settled = np.max(np.abs(np.linalg.eigvals(fit.A))) < 1 - _FREED_RADIUS_MARGIN
+                if drops and (not settled or trial_rms > trial.rms * (1 + options.min_gain)):
+                    # The simulation disagrees with the sweeps' spectra, or a pole ran to z = 1: drop it and refit.
+                    poles = _without_freed_pole(np.linalg.eigvals(fit.A), options.band, body.fs)
+                    if poles is not None:
+                        starts.append((drops - 1, label + ", freed pole dropped", lti.real_block_diagonal(poles),
+                                       np.zeros((poles.size, 1)), np.zeros((1, poles.size)), np.zeros((1, 1)), reflected))
+            if moved is not None and moved_rms <= pick_rms * (1 + options.min_gain):
                 body, delay, sweep_spectra, pick, pick_rms = longer, delay + extra, longer_sweeps, moved, moved_rms
             else:  # the sweeps disagree: keep the onset's delay
                 extra = 0

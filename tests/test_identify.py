@@ -79,3 +79,20 @@ def test_gamma_beyond_half_segment_is_rejected(sessions):
     session = sessions["ff"]
     with pytest.raises(IdentificationError, match="exceeds half the segment length"):
         identify(session.noise, session.sweeps, "ff", IdentificationOptions(gammas=(2000,)))
+
+
+def test_freed_pole_dropped_is_the_out_of_band_one_nearest_the_unit_circle():
+    import importlib
+
+    module = importlib.import_module("sysid.identify")
+    fs = 48000.0
+    mode = 0.99 * np.exp(2j * np.pi * 1000.0 / fs)  # 1 kHz, in band
+    high_pass = np.exp(-2 * np.pi * 5.0 / fs)  # 5 Hz coupling corner, out of band
+    freed = 1 - 1e-9  # run to z = 1
+    poles = np.array([mode, np.conj(mode), high_pass, freed, 0.3])
+    kept = module._without_freed_pole(poles, (20.0, 5000.0), fs)
+    assert sorted(np.round(np.abs(kept), 9)) == sorted(np.round(np.abs([mode, mode, high_pass, 0.3]), 9))
+    # A pair out of band goes with its conjugate; nothing out of band: nothing to drop.
+    pair = 0.999 * np.exp(2j * np.pi * 10.0 / fs)
+    assert module._without_freed_pole(np.array([mode, np.conj(mode), pair, np.conj(pair)]), (20.0, 5000.0), fs).size == 2
+    assert module._without_freed_pole(np.array([mode, np.conj(mode)]), (20.0, 5000.0), fs) is None

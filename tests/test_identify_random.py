@@ -17,8 +17,11 @@ OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
 # Issue 10 asks for 20 plants in the default run; one identification of a short session
 # takes 2-25 s of CPU, median 6-9 s (BENCHMARKS.md, random helmets), so the default run
 # holds ten: seeds of 0-39 that reach the floor in under 8 s (true orders 3 to 13, delays
-# 1 to 61 samples). The slow run holds all of seeds 0-99; at least 95 % must pass.
-DEFAULT_SEEDS = (3, 11, 18, 22, 29, 32, 34, 36, 38, 39)
+# 1 to 61 samples), and two whose delay a 4-sample search at the picked order missed (30: the onset
+# 10 samples short, found by the 12-sample search; 49: 3 short, kept only by a lower order refitted
+# behind the moved delay).
+# The slow run holds all of seeds 0-99; at least 95 % must pass.
+DEFAULT_SEEDS = (3, 11, 18, 22, 29, 32, 34, 36, 38, 39, 30, 49)
 SLOW_SEEDS = range(100)
 
 

@@ -55,6 +55,18 @@ class TestRefineDelay:
         assert extra in (3, 4)
         assert costs.shape == (5,) and costs[3] <= costs.min() * 1.001
 
+    @pytest.mark.parametrize("seed", [0, 3, 7, 12])
+    def test_window_grows_while_the_cost_still_falls(self, seed):
+        # 9 samples short with 3 spare poles: the cost falls up to j = 6 (beyond the first
+        # window of 4), stays flat to 9 (or one or two more for smooth starts), then rises.
+        rp = random_plant(seed)
+        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
+        body = compensate_delay(session.noise.trimmed(3.0), rp.delay - 9)
+        A = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), [0.0, 0.02, -0.02]]))
+        extra, costs = refine_delay(A, body, (20.0, 5000.0), 1.0)
+        assert 9 <= extra <= 11
+        assert costs.size == 13 and costs[0] > 1.5 * costs.min()
+
     def test_a_delay_already_right_stays(self):
         rp = random_plant(0)
         session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
