@@ -39,9 +39,8 @@ static int16_t anc_sat16(int32_t v)
 {
     return (int16_t)((v > 32767) ? 32767 : ((v < -32768) ? -32768 : v));
 }
-#if ANC_B < 4
-/* Blocks shorter than the filters' four-sample section loops: one step call per frame
- * (process() would run the same per-sample kernel behind its block and chunk bookkeeping). */
+/* One step call per frame: for blocks of at most 4 frames the filters' per-sample kernel costs
+ * less than process(), whose section loops and chunk bookkeeping pay off on longer blocks. */
 #define ANC_PROCESS(filter, state, in, out)                  \
     do {                                                     \
         size_t j_;                                           \
@@ -49,9 +48,6 @@ static int16_t anc_sat16(int32_t v)
             (out)[j_] = filter##_q15_step(state, (in)[j_]);  \
         }                                                    \
     } while (0)
-#else
-#define ANC_PROCESS(filter, state, in, out) filter##_q15_process(state, in, out, ANC_B)
-#endif
 #define ANC_RESET(filter, state) filter##_q15_reset(state)
 #endif
 
