@@ -482,10 +482,13 @@ def render(snr: dict, generated: dict, cmsis: dict, cmsis_target: dict, sizes: d
               "The previous generated kernel (delta-form sections with separately aligned numerator and feedback "
               "sums, 64-bit shifts and compares, sample after sample) took 43.0 instructions per sample and section "
               "on the FB model by the same count.",
-              "- Blocks shorter than 4 samples (the per-sample control path) run sample by sample through all "
-              "sections in one function, same arithmetic, states read and written in the instance: a one-sample "
-              "call pays for the state traffic of every section and the call itself, so the control path should "
-              "budget the one-sample figures, not the block figures.",
+              "- Blocks shorter than 4 samples run sample by sample through all sections in one function, same "
+              "arithmetic; `NAME_q15_step` (the per-sample control path's call) runs it on one sample without "
+              "process()'s block bookkeeping. Each section's input history is the previous section's output "
+              "history (one copy in the state), so per section only its outputs and residue are loaded and "
+              "stored, and its coefficients come from one table. A one-sample call still pays for the state "
+              "traffic of every section and the call itself, so the control path should budget the one-sample "
+              "figures (\"Board control loop\" counts step), not the block figures.",
               f"- float32: worst sweep {worst_float:.1f} dB (target 75 dB); the delta-form feedback coefficients "
               "(c1 = -a1 - 2, c2 = 1 - a2) keep float32's relative precision on the poles' distance from z = 1.",
               "- CMSIS-DSP on this generator's sections against CMSIS-DSP on zpk2sos sections: the float32 DF2T kernel "
