@@ -80,15 +80,6 @@ def _check_random(seed):
 SHORT_OF_TRUTH = {
     1: "the identified FB model misses a mode near 30 Hz (10x its noise floor; 3.4x |S_model| off at 30 Hz) and "
        "states 95 % errors >= 100 % at 22-43 Hz, where the design must then leave the wind noise alone",
-    3: "the FB model's stated band is >= 100 % at 23-88 and 111-193 Hz although the model is within 0.5 % of the "
-       "truth there (the band is too wide by two to four decades), so the design stays out of those bands",
-    4: "with identify as of 74c1143 the FB model validates at 1.08x its floor (delay 13 against the true 14) yet "
-       "'both' reaches 0.4 dB against 3.3 dB for the true-plant design; on the models identify gave at 10:50 the "
-       "same design reached 4.1 dB, above it: the cause lies in the changed model or band, not yet pinned down",
-    8: "identify's uncertainty band for the FB model is NaN at all 250 frequencies (overflow in the covariance's "
-       "pseudo-inverse); a band that states nothing is treated as nothing known, so W and Q do almost nothing",
-    12: "the FB model's stated band (0.1-0.5 in band, up to 1 at 20 Hz) exceeds its true error (< 0.5 %) by two "
-        "decades; the robust W and Q it allows fall more than 1 dB short (both run stable and as predicted)",
 }
 # Identification defects that make the stability verdict itself fail (not fixed in anc).
 UNSTABLE_VERDICT = {
