@@ -255,9 +255,9 @@ def test_excluded_stretches_are_filled_with_the_models_prediction():
 
 
 def test_a_refit_whose_warm_start_reaches_the_floor_skips_the_re_identification():
-    from sysid.refits import _refit
+    from sysid.refits import WARM_ENOUGH, _refit
     session, model = effect_case("ff", 5, ())
-    assert compare(model, session.sweeps).ratio <= 1.2
+    assert compare(model, session.sweeps).ratio <= WARM_ENOUGH
 
     def reidentify():
         raise AssertionError("re-identified although a trial was at the floor")
