@@ -236,7 +236,8 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
     decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, max(orders))
     candidates = search_orders(scan_block, sweep_spectra, decompositions, grid_gammas, orders, floor,
-                               feedthrough=options.feedthrough, at_floor=options.at_floor, progress=progress)
+                               feedthrough=options.feedthrough, at_floor=options.at_floor, min_gain=options.min_gain,
+                               progress=progress)
     scan = [c.to_dict() for c in candidates]
     # The lowest order within min_gain of the best validation rms.
     best_rms = min(c.rms for c in candidates)

@@ -4,15 +4,20 @@ The order search refines starts built from poles of neighbouring orders; two pol
 land almost on one another, and the modal form with a unit output row then holds the
 response only through huge, cancelling entries of B (1e9-1e12 on random helmets), above
 the model file's limit (``sysid.model.MAX_COEFFICIENT``): identify used to raise there.
+A search stalled above the floor gets the mode it missed inserted (``_insert_modes``), and
+one near the floor gets nothing.
 """
 
 import numpy as np
 import pytest
+import scipy.signal
 
 from sysid import lti
 from sysid.model import MAX_COEFFICIENT, Model
+from sysid.order_search import OrderCandidate, _insert_modes, _pair, sweep_rms
 from sysid.output_error import block_data, refine_output_error
 from sysid.recordings import Recording
+from sysid.validation import sweep_spectrum
 
 FS = 44100.0
 Z = np.exp(1j * np.linspace(0.01, 3.0, 200))
@@ -51,3 +56,63 @@ def test_fit_too_close_to_balance_is_still_within_the_model_limit():
     largest = max(np.abs(fit.A).max(), np.abs(fit.B).max(), np.abs(fit.C).max())
     assert largest < 1e-3 * MAX_COEFFICIENT
     Model(path="fb", fs=FS, A=fit.A, B=fit.B, C=fit.C, D=fit.D)
+
+
+# A plant of two modes, 35 Hz Q 7 and 500 Hz Q 20 (sysid.order_search._insert_modes): a model
+# of the 500 Hz mode alone has stalled far above the floor, as the scan does on random helmets
+# whose lightly damped mode below 60 Hz no start found.
+_MODES = ((35.0, 7.0), (500.0, 20.0))
+
+
+def _two_mode_plant():
+    poles = np.concatenate([_pair(f, q, FS) for f, q in _MODES])
+    A = lti.real_block_diagonal(poles)
+    C = lti.block_output_row(A)
+    B = np.ones((4, 1))
+    # Each mode's own peak gain 1: scale its B entries by its response at its frequency.
+    for k, (f, _) in enumerate(_MODES):
+        Bk = np.zeros((4, 1))
+        Bk[2 * k:2 * k + 2] = 1.0
+        B[2 * k:2 * k + 2] /= abs(lti.frequency_response(A, Bk, C, 0.0, np.array([np.exp(2j * np.pi * f / FS)]))[0])
+    return A, B, C, np.zeros((1, 1))
+
+
+def _insertion_case():
+    rng = np.random.default_rng(1)
+    A, B, C, D = _two_mode_plant()
+    noise = 1e-3
+    u = rng.standard_normal(int(FS))
+    block = block_data(Recording(u, lti.simulate(A, B, C, D, u) + noise * rng.standard_normal(u.size), FS),
+                       (20.0, 5000.0), 1.0)
+    t = np.arange(int(FS)) / FS
+    sweeps = []
+    for _ in range(2):
+        x = 0.5 * scipy.signal.chirp(t, 20.0, t[-1], 5000.0, method="logarithmic")
+        y = lti.simulate(A, B, C, D, x) + noise * rng.standard_normal(x.size)
+        sweeps.append(sweep_spectrum(Recording(x, y, FS), (20.0, 4000.0), skip_s=0.0))
+    floor = sweep_rms(A, B, C, D, sweeps)
+    fit = refine_output_error(lti.real_block_diagonal(_pair(500.0, 20.0, FS)), np.zeros((2, 1)), np.zeros((1, 2)),
+                              np.zeros((1, 1)), block)
+    stalled = OrderCandidate(2, "500 Hz only", sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps), fit.A, fit.B, fit.C, fit.D)
+    return block, sweeps, floor, stalled
+
+
+def test_a_stalled_search_gets_the_missing_mode_inserted():
+    block, sweeps, floor, stalled = _insertion_case()
+    assert stalled.rms > 10 * floor
+    best = {2: stalled}
+    _insert_modes(best, block, sweeps, floor, max_order=30, feedthrough=False, max_iterations=20, at_floor=1.02,
+                  min_gain=0.03)
+    assert best[4].rms <= 1.2 * floor
+    frequencies = np.abs(np.angle(np.linalg.eigvals(best[4].A))) * FS / (2 * np.pi)
+    assert np.min(np.abs(frequencies - 35.0)) < 2.0
+    assert "mode at" in best[4].start
+
+
+def test_a_search_near_the_floor_gets_nothing_inserted():
+    block, sweeps, floor, stalled = _insertion_case()
+    # The same stalled model, with the floor said to be where it already validates.
+    best = {2: stalled}
+    _insert_modes(best, block, sweeps, stalled.rms, max_order=30, feedthrough=False, max_iterations=20,
+                  at_floor=1.02, min_gain=0.03)
+    assert list(best) == [2] and best[2] is stalled
