@@ -375,10 +375,16 @@ MAX_RECORDING_BYTES = 2 * 2**30
 # An ear channel below half a 16-bit LSB (RMS) is digital silence: nothing is connected.
 SILENT_RMS = 2.0**-16
 # Median magnitude-squared coherence between input and ear channel, 100 Hz - 4 kHz, below which
-# the ear microphone does not hear the path at all. Sessions of the appendix-A plants and of
-# random helmet paths (sysid.random_plant, seeds 0-5, both paths) measure 0.89 to 0.999.
+# the ear microphone does not hear the path at all. It is estimated on stretches short enough
+# that an ear clock off by up to a few hundred ppm (effects.md, clock drift) slips by no more than
+# a few samples inside one: over a whole recording such a slip turns the cross-spectrum's phase
+# and the averaged coherence of a healthy channel collapses above a few hundred Hz (60 ppm over
+# 20 s: median 0.01). A sweep, whose every frequency is excited only briefly, is judged over the
+# whole recording instead (a stretch of it excites a few bins only): the larger of the two counts.
 UNCORRELATED_COHERENCE = 0.1
-_COHERENCE_SEGMENT = 1024
+_COHERENCE_SEGMENT = 512
+_COHERENCE_STRETCH = 32 * _COHERENCE_SEGMENT
+_COHERENCE_STRETCHES = 8
 
 
 def _check_ear_channel(recording: RecordingFile, scan: _Scan) -> None:
@@ -387,15 +393,35 @@ def _check_ear_channel(recording: RecordingFile, scan: _Scan) -> None:
     fix = "check the microphone, or choose the channels with --input-channel/--output-channel"
     if np.sqrt(scan.y_energy / scan.length) < SILENT_RMS:
         raise RecordingError(f"{name}: ear channel {recording.output_channel} is silent (disconnected microphone?); {fix}")
-    if recording.length < 8 * _COHERENCE_SEGMENT:
-        return
+    coherence = ear_coherence(recording)
+    if coherence is not None and coherence < UNCORRELATED_COHERENCE:
+        raise RecordingError(f"{name}: ear channel {recording.output_channel} does not follow input channel "
+                             f"{recording.input_channel} (median coherence {coherence:.2f}); {fix}")
+
+
+def ear_coherence(recording) -> float | None:
+    """Median coherence (Welch, Hann, ``_COHERENCE_SEGMENT``-sample segments) of input and ear
+    channel in 100 Hz - 4 kHz: the larger of its value over the whole recording and the median
+    over up to ``_COHERENCE_STRETCHES`` stretches of ``_COHERENCE_STRETCH`` samples spread over
+    it (each stretch's own median); None for a recording shorter than one stretch."""
     from .spectra import response, streamed_spectra  # spectra builds on this module
 
-    spectra = streamed_spectra(recording.read, recording.length, fs, _COHERENCE_SEGMENT, name)
-    coherence = response(spectra, (100.0, min(4000.0, 0.45 * fs))).coherence
-    if coherence.size and float(np.median(coherence)) < UNCORRELATED_COHERENCE:
-        raise RecordingError(f"{name}: ear channel {recording.output_channel} does not follow input channel "
-                             f"{recording.input_channel} (median coherence {float(np.median(coherence)):.2f}); {fix}")
+    count = min(recording.length // _COHERENCE_STRETCH, _COHERENCE_STRETCHES)
+    if count < 1:
+        return None
+    band = (100.0, min(4000.0, 0.45 * recording.fs))
+
+    def median_coherence(read, length):
+        spectra = streamed_spectra(read, length, recording.fs, _COHERENCE_SEGMENT, recording.path)
+        coherence = response(spectra, band).coherence
+        return float(np.median(coherence)) if coherence.size else np.nan
+
+    whole = median_coherence(recording.read, recording.length)
+    stretches = [median_coherence(lambda a, b, start=start: recording.read(start + a, start + b), _COHERENCE_STRETCH)
+                 for start in np.linspace(0, recording.length - _COHERENCE_STRETCH, count).astype(int)]
+    values = [v for v in (whole, float(np.nanmedian(stretches)) if np.any(np.isfinite(stretches)) else np.nan)
+              if np.isfinite(v)]
+    return max(values) if values else None
 
 
 def recording_from_arrays(u, y, fs: float, name: str = "<array>") -> Recording:
