@@ -11,7 +11,9 @@
    (``order_search``), up to ``max_order`` or until the validation rms reaches the
    noise floor; the lowest order within ``min_gain`` of the best is refined on a
    longer block. Both the seed's choice and the refined model are reported; the
-   refined one is returned when it validates better.
+   refined one is returned when it validates better. A pick whose simulated sweeps
+   disagree with the sweeps' spectra loses its out-of-band poles run to the unit
+   circle (``_settle``).
 5. The onset's delay errs short by the smoothing kernel's lead; the picked model's
    poles say by how much (``latency.refine_delay``), and the samples its core spent
    imitating delay move into the delay line before the final refinement.

@@ -16,6 +16,11 @@ little gain stops on a plateau of them. Here every order n = 1..n_max is tried
 Every start is screened by the output-error cost with its poles held fixed (one linear
 least-squares solve), the best few are refined (``output_error``) and ranked by the
 validation rms on the sweeps; the best refined model of each order is kept.
+
+A scan that ends above 1.2x the floor has usually missed a lightly damped mode that no
+start above holds (``_insert_modes``): a pair is then added to the picked model at the
+frequency and damping, from a fixed log-spaced set, whose fixed-pole cost is lowest, and
+refined; searches that reach the floor never run it.
 """
 
 from __future__ import annotations

@@ -23,6 +23,11 @@ OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
 # The slow run holds all of seeds 0-99; at least 95 % must pass.
 DEFAULT_SEEDS = (3, 11, 18, 22, 29, 32, 34, 36, 38, 39, 30, 49)
 SLOW_SEEDS = range(100)
+# Seeds whose order search stalled in a local minimum, 4x-46x above the floor (1, 25, 27, 72: a
+# lightly damped mode below 60 Hz or near 150 Hz missed, found by sysid.order_search's mode
+# insertion), or whose pick rang in simulation through an out-of-band pole at z = -1 (63, 13x:
+# dropped by identify's settling). 12-22 s of CPU each, so slow-marked.
+LOCAL_MINIMUM_SEEDS = (1, 25, 27, 63, 72)
 
 
 def _failure(seed: int) -> str | None:
@@ -51,6 +56,13 @@ def _failure(seed: int) -> str | None:
 
 @pytest.mark.parametrize("seed", DEFAULT_SEEDS)
 def test_random_helmet_reaches_the_floor(seed):
+    failure = _failure(seed)
+    assert failure is None, failure
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", LOCAL_MINIMUM_SEEDS)
+def test_random_helmet_out_of_a_local_minimum_reaches_the_floor(seed):
     failure = _failure(seed)
     assert failure is None, failure
 
