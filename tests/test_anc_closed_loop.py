@@ -105,13 +105,13 @@ def _random_cases(seeds):
     return cases
 
 
-@pytest.mark.parametrize("seed", _random_cases([5]))
+@pytest.mark.parametrize("seed", _random_cases([3]))
 def test_random_plants_identified_match_truth(seed):
     _check_random(seed)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", _random_cases([1, 2, 3, 4, *range(6, 13)]))
+@pytest.mark.parametrize("seed", _random_cases([1, 2, 4, 5, *range(6, 13)]))
 def test_random_plants_identified_match_truth_slow(seed):
     _check_random(seed)
 
