@@ -6,8 +6,9 @@
   interpolation; the samples the ear channel lacks at the end are dropped from
   both channels.
 - ``excluded`` stretches [start_s, stop_s] of a recording (clipped, say) are left
-  out: ``excluded_mask`` marks them for validation, ``without_excluded`` cuts them
-  out of a recording for identification.
+  out: ``excluded_mask`` marks them for validation; for identification ``refine``
+  fills them with the previous model's prediction (``sysid.refits``), since stretches
+  cut out and joined leave a transient at every joint.
 
 ``output_offset`` needs no correction of the data: ``Model.simulate`` adds it.
 """
@@ -21,7 +22,7 @@ import scipy.interpolate
 
 from .recordings import Recording
 
-__all__ = ["resample_ear", "corrected", "excluded_mask", "without_excluded", "recording_key"]
+__all__ = ["resample_ear", "corrected", "excluded_mask", "recording_key"]
 
 
 def resample_ear(y: np.ndarray, ratio: float) -> np.ndarray:
@@ -55,12 +56,3 @@ def excluded_mask(recording: Recording, excluded: dict) -> np.ndarray:
     for start, stop in excluded.get(recording_key(recording), ()):
         mask[int(round(start * recording.fs)):int(round(stop * recording.fs))] = True
     return mask
-
-
-def without_excluded(recording: Recording, excluded: dict) -> Recording:
-    """The recording with its excluded stretches cut out (the parts joined end to end)."""
-    mask = excluded_mask(recording, excluded)
-    if not mask.any():
-        return recording
-    return Recording(recording.u[~mask], recording.y[~mask], recording.fs, recording.path,
-                     recording.clipped_fraction, recording.dc_offset)
