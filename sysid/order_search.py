@@ -32,6 +32,7 @@ import numpy as np
 from . import lti
 from .output_error import BlockData, linear_cost, refine_output_error, residual_spectrum
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
+from .thresholds import AT_FLOOR
 from .validation import SweepSpectrum, rms_from_responses
 
 __all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
@@ -45,10 +46,9 @@ _SCREEN_RATIO = 2.0
 # Damping of a mode placed at the largest residual (Q of the new pair).
 _NEW_MODE_Q = 10.0
 # Mode insertion after a stalled scan (``_insert_modes``): it runs only when the best model
-# validates above _STALL_RATIO times the floor; a pair of each Q at each of _INSERT_FREQUENCIES
+# validates above AT_FLOOR times the floor; a pair of each Q at each of _INSERT_FREQUENCIES
 # log-spaced frequencies across the block's band is screened, the best _INSERT_REFINED refined,
 # for up to _INSERT_ROUNDS rounds while a round gains 1 %.
-_STALL_RATIO = 1.2
 _INSERT_FREQUENCIES = 40
 _INSERT_Q = (3.0, 20.0)
 _INSERT_REFINED = 3
@@ -86,21 +86,17 @@ def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np
     # Average over about 1 % of the bins so that one noisy bin does not decide.
     width = max(1, block.z.size // 100)
     smoothed = np.convolve(relative, np.ones(width) / width, mode="same")
-    omega = float(np.angle(block.z[int(np.argmax(smoothed))]))
-    radius = np.exp(-omega / (2 * _NEW_MODE_Q))
-    p = radius * np.exp(1j * omega)
-    return np.array([p, np.conj(p)])
+    return _pair(float(np.angle(block.z[int(np.argmax(smoothed))])), _NEW_MODE_Q)
 
 
-def _pair(frequency_hz: float, q: float, fs: float) -> np.ndarray:
-    """A conjugate pair at ``frequency_hz`` (Hz) with quality factor ``q``: r e^{+-j w}, r = e^{-w / 2q}, w = 2 pi f / fs."""
-    omega = 2 * np.pi * frequency_hz / fs
+def _pair(omega: float, q: float) -> np.ndarray:
+    """A conjugate pair at ``omega`` (rad/sample) with quality factor ``q``: r e^{+-j omega}, r = e^{-omega / 2q}."""
     p = np.exp(-omega / (2 * q)) * np.exp(1j * omega)
     return np.array([p, np.conj(p)])
 
 
 def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: list[SweepSpectrum], floor: float,
-                  max_order: int, feedthrough: bool, max_iterations: int, at_floor: float, min_gain: float) -> None:
+                  max_order: int, feedthrough: bool, max_iterations: int, min_gain: float) -> None:
     """Add a mode to the picked model where the output-error cost drops most, and refine (updates ``best``).
 
     A scan that stalls above the floor has usually missed one lightly damped mode (often
@@ -115,7 +111,7 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
     grid = np.geomspace(max(frequencies_hz.min(), 1.0), frequencies_hz.max(), _INSERT_FREQUENCIES)
     for _ in range(_INSERT_ROUNDS):
         record = min(c.rms for c in best.values())
-        if record <= _STALL_RATIO * floor:
+        if record <= AT_FLOOR * floor:
             return
         base = next(best[n] for n in sorted(best) if best[n].rms <= record * (1 + min_gain))
         n = base.order + 2
@@ -125,7 +121,7 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
         screened = []
         for frequency in grid:
             for q in _INSERT_Q:
-                A = lti.real_block_diagonal(np.concatenate([poles, _pair(frequency, q, block.fs)]))
+                A = lti.real_block_diagonal(np.concatenate([poles, _pair(2 * np.pi * frequency / block.fs, q)]))
                 screened.append((linear_cost(A, block, feedthrough=feedthrough), frequency, q, A))
         screened.sort(key=lambda item: item[0])
         for _, frequency, q, A in screened[:_INSERT_REFINED]:
@@ -204,6 +200,6 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
             if progress and k + 1 < len(orders):
                 progress(len(orders), len(orders), "order search")
             break
-    if min(c.rms for c in best.values()) > _STALL_RATIO * floor:
-        _insert_modes(best, block, sweeps, floor, max(orders), feedthrough, max_iterations, at_floor, min_gain)
+    if min(c.rms for c in best.values()) > AT_FLOOR * floor:
+        _insert_modes(best, block, sweeps, floor, max(orders), feedthrough, max_iterations, min_gain)
     return [best[n] for n in sorted(best)]

@@ -65,7 +65,7 @@ _MODES = ((35.0, 7.0), (500.0, 20.0))
 
 
 def _two_mode_plant():
-    poles = np.concatenate([_pair(f, q, FS) for f, q in _MODES])
+    poles = np.concatenate([_pair(2 * np.pi * f / FS, q) for f, q in _MODES])
     A = lti.real_block_diagonal(poles)
     C = lti.block_output_row(A)
     B = np.ones((4, 1))
@@ -91,7 +91,7 @@ def _insertion_case():
         y = lti.simulate(A, B, C, D, x) + noise * rng.standard_normal(x.size)
         sweeps.append(sweep_spectrum(Recording(x, y, FS), (20.0, 4000.0), skip_s=0.0))
     floor = sweep_rms(A, B, C, D, sweeps)
-    fit = refine_output_error(lti.real_block_diagonal(_pair(500.0, 20.0, FS)), np.zeros((2, 1)), np.zeros((1, 2)),
+    fit = refine_output_error(lti.real_block_diagonal(_pair(2 * np.pi * 500.0 / FS, 20.0)), np.zeros((2, 1)), np.zeros((1, 2)),
                               np.zeros((1, 1)), block)
     stalled = OrderCandidate(2, "500 Hz only", sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps), fit.A, fit.B, fit.C, fit.D)
     return block, sweeps, floor, stalled
@@ -101,7 +101,7 @@ def test_a_stalled_search_gets_the_missing_mode_inserted():
     block, sweeps, floor, stalled = _insertion_case()
     assert stalled.rms > 10 * floor
     best = {2: stalled}
-    _insert_modes(best, block, sweeps, floor, max_order=30, feedthrough=False, max_iterations=20, at_floor=1.02,
+    _insert_modes(best, block, sweeps, floor, max_order=30, feedthrough=False, max_iterations=20,
                   min_gain=0.03)
     assert best[4].rms <= 1.2 * floor
     frequencies = np.abs(np.angle(np.linalg.eigvals(best[4].A))) * FS / (2 * np.pi)
@@ -114,5 +114,5 @@ def test_a_search_near_the_floor_gets_nothing_inserted():
     # The same stalled model, with the floor said to be where it already validates.
     best = {2: stalled}
     _insert_modes(best, block, sweeps, stalled.rms, max_order=30, feedthrough=False, max_iterations=20,
-                  at_floor=1.02, min_gain=0.03)
+                  min_gain=0.03)
     assert list(best) == [2] and best[2] is stalled
