@@ -69,6 +69,11 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
     return np.concatenate((np.zeros(min(d, x.size)), x[: max(x.size - d, 0)])) if d else x
 
 
+def _plain_input(model):
+    """The model's input map: its input polynomial, then its delay."""
+    return lambda u: _shift(model.apply_input_nonlinearity(u), model.delay)
+
+
 def _disturbance(model: Model, recording: Recording, frequencies) -> np.ndarray:
     """Sinusoids at frequencies fitted to the recording's residual under ``model``."""
     if not frequencies:
@@ -215,7 +220,7 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     trial = _with(model, _core(model), input_nonlinearity=coefficients)
 
     def reidentify():
-        core = _reidentify(model, noise, sweeps, lambda u: _shift(trial.apply_input_nonlinearity(u), model.delay),
+        core = _reidentify(model, noise, sweeps, _plain_input(trial),
                            model.disturbance_frequencies, options, transient_s)
         return _with(model, _core(core), uncertainty=core.uncertainty, delay=model.delay + core.delay,
                      input_nonlinearity=coefficients, identification=dict(core.identification))
@@ -227,7 +232,7 @@ def add_periodic_disturbance(model, noise, sweeps, params, options, transient_s)
     kept = _with(model, _core(model), disturbance_frequencies=frequencies)
 
     def reidentify():
-        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
+        core = _reidentify(model, noise, sweeps, _plain_input(model),
                            frequencies, options, transient_s)
         return _with(model, _core(core), uncertainty=core.uncertainty, delay=model.delay + core.delay,
                      disturbance_frequencies=frequencies, identification=dict(core.identification))
@@ -245,7 +250,7 @@ def add_order(model, noise, sweeps, params, options, transient_s):
     grown = _grown(model, data, blocks)
 
     def reidentify():
-        core = _reidentify(model, noise, sweeps, lambda u: _shift(model.apply_input_nonlinearity(u), model.delay),
+        core = _reidentify(model, noise, sweeps, _plain_input(model),
                            model.disturbance_frequencies, options, transient_s, extra_order=extra)
         return _with(model, _core(core), uncertainty=core.uncertainty,
                      delay=model.delay + core.delay, identification=dict(core.identification))
@@ -333,10 +338,6 @@ def add_input_noise(model, noise, sweeps, params, options, transient_s):
     refined = _with(model, (oe.A, oe.B, oe.C, oe.D))
     refined.identification["estimator"] = "bias-compensated output error (errors in variables)"
     return refined, {"input_noise_density": density}
-
-
-def _plain_input(model):
-    return lambda u: _shift(model.apply_input_nonlinearity(u), model.delay)
 
 
 def add_dc_offset(model, noise, sweeps, params, options, transient_s):
