@@ -130,6 +130,16 @@ def repeat_lag(sweep1: Recording, sweep2: Recording) -> int:
     return _align(sweep1.u, sweep2.u)
 
 
+def _aligned_ears(sweep1: Recording, sweep2: Recording, skip_s: float, lag: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The two ear signals over their overlap after alignment (``repeat_lag``, or the ``lag`` given),
+    without the first ``skip_s`` seconds; empty when they do not overlap past it."""
+    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
+    y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
+    first = int(round(skip_s * sweep1.fs))
+    n = max(min(y1.size, y2.size), first)
+    return y1[first:n], y2[first:n]
+
+
 def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S,
                 lag: int | None = None) -> float:
     """Output-noise RMS in band (FS) from two recordings of the same excitation.
@@ -138,14 +148,10 @@ def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip
     the ear signals' difference then holds the output noise of both, so the floor is
     rms(y1 - y2) / sqrt(2).
     """
-    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
-    y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
-    first = int(round(skip_s * sweep1.fs))
-    n = min(y1.size, y2.size)
-    if n - first < 2:
+    y1, y2 = _aligned_ears(sweep1, sweep2, skip_s, lag)
+    if y1.size < 2:
         raise IdentificationError(f"{sweep1.path}, {sweep2.path}: sweeps do not overlap enough to estimate the noise floor")
-    difference = y1[first:n] - y2[first:n]
-    return band_rms(difference, sweep1.fs, band) / np.sqrt(2.0)
+    return band_rms(y1 - y2, sweep1.fs, band) / np.sqrt(2.0)
 
 
 def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, lag: int | None = None) -> None:
@@ -156,11 +162,8 @@ def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, 
     infinite and every band "above the noise floor". No other estimate of the output
     noise exists in the sweeps, so this is an error rather than a warning.
     """
-    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
-    y1, y2 = (sweep1.y[lag:], sweep2.y) if lag >= 0 else (sweep1.y, sweep2.y[-lag:])
-    first = int(round(skip_s * sweep1.fs))
-    n = min(y1.size, y2.size)
-    if n - first >= 2 and np.array_equal(y1[first:n], y2[first:n]):
+    y1, y2 = _aligned_ears(sweep1, sweep2, skip_s, lag)
+    if y1.size >= 2 and np.array_equal(y1, y2):
         raise IdentificationError(f"{sweep1.path}, {sweep2.path}: the two sweeps are sample-identical (the same "
                                   "recording twice?), so the noise floor is unknown; give two separate recordings")
 
