@@ -14,7 +14,9 @@ whose predicted attenuation in every third-octave band of ``TRUNCATION_BANDS_HZ`
 ``TRUNCATION_TOLERANCE_DB`` of the full-order filter's (Q alone and both for Q; W alone and
 both for W) and, for Q, whose loop stays inside the design's bounds on the design grid
 (``anc.feedback``: r_95 |S_model Q| <= ``ROBUSTNESS_BOUND`` and |1 + G Q| no more than the
-larger of ``max_amplification_db`` and the full-order filter's peak). If no smaller order
+larger of ``max_amplification_db`` and the full-order filter's peak), for W, which keeps the
+band rule in every band 20 Hz-2 kHz (``anc.feedforward.BandRule``: W makes no band more than
+0.1 dB louder, alone or with Q). If no smaller order
 qualifies the full order is kept. Chosen orders and the largest band change are in the
 controller's ``provenance["truncation"]`` and its notes.
 """
@@ -35,7 +37,7 @@ from .basis import LaguerreBasis
 from .controller import Controller, StateSpaceFilter
 from .disturbance import Disturbance, default_disturbance
 from .feedback import ROBUSTNESS_BOUND, design_feedback, design_grid, loop_margins
-from .feedforward import design_feedforward
+from .feedforward import BAND_TOLERANCE_DB, BandRule, design_feedforward
 from .prediction import band_attenuation, band_centres, band_grid, coherence_bound, ear_psd, overall_dba
 from .uncertainty import Uncertainty, model_uncertainty
 
@@ -224,7 +226,13 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             on = bands(fb, candidate)
             return float(max(np.max(np.abs(on[part] - reference[part])) for part in ("ff", "both")))
 
-        ff, truncation["ff"] = _lowest_order(basis, ff_design.coefficients, ff_change, search=options.truncate)
+        rule = BandRule(fb_model, disturbance, options.latency, loop_fn)
+
+        def ff_admissible(candidate):
+            return rule.holds(candidate.frequency_response(rule.frequencies_hz, fb_model.fs))
+
+        ff, truncation["ff"] = _lowest_order(basis, ff_design.coefficients, ff_change, ff_admissible,
+                                              options.truncate)
         notes += ff_design.notes
     elif options.feedforward:
         notes.append("no feed-forward filter: no FF model and no chin-microphone spectrum")
@@ -245,6 +253,9 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         "basis": {"kind": "Laguerre", "pole": basis.pole, "order": basis.order,
                   "feedback_highpass_pole": fb_basis.highpass_pole},
         "truncation": {"tolerance_db": TRUNCATION_TOLERANCE_DB, "bands_hz": list(TRUNCATION_BANDS_HZ), **truncation},
+        "feedforward_band_rule": {"tolerance_db": BAND_TOLERANCE_DB, "bands": "third-octave 20 Hz-2 kHz",
+                                  "rule": "W makes no band louder than without it by more than the tolerance: W alone "
+                                          "against no control, W with Q against Q alone (predicted on the models)"},
         "design_seconds_cpu": time.process_time() - started,
     }
     info.update(provenance or {})

@@ -16,6 +16,11 @@ at 90 Hz and 3 dB lower per harmonic, 8 Hz wide (Lorentzian; the speed wanders).
 feed-forward model P the chin microphone gets this spectrum and the ear gets
 |P|^2 times it plus a part not coherent with the chin (other paths, the ear's own
 flow noise) that sets the coherence to ``coherence`` (default 0.99, a 20 dB bound).
+Outside the band the FF model is vouched for (``anc.uncertainty.stated_band``) P is an
+extrapolation, so its gain there is capped at its largest gain inside the band (phase kept):
+an identified FF model of random helmet 7 has a pole at z = -1 (radius 1 - 1e-9) and 6.7e6
+times its in-band gain at fs/2, which made nearly all of the chin-coherent ear power sit at
+fs/2 and the feed-forward design spend its filter there.
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ import scipy.signal
 
 from sysid.errors import HelmetAncError
 from sysid.model import Model
+
+from .uncertainty import stated_band
 
 __all__ = ["Disturbance", "default_spectrum", "default_disturbance", "from_recording", "synthesize"]
 
@@ -94,6 +101,16 @@ def _grid(fs: float) -> np.ndarray:
     return np.linspace(0.0, fs / 2.0, 8193)
 
 
+def _vouched(ff_model: Model, frequencies_hz: np.ndarray) -> np.ndarray:
+    """P at frequencies (Hz), its gain capped outside the stated band at the largest gain inside it."""
+    P = ff_model.frequency_response(frequencies_hz)
+    lo, hi = stated_band(ff_model)
+    inside = (frequencies_hz >= lo) & (frequencies_hz <= hi)
+    peak = float(np.max(np.abs(ff_model.frequency_response(np.geomspace(lo, hi, 2000)))))
+    capped = P * np.minimum(1.0, peak / np.maximum(np.abs(P), 1e-300))
+    return np.where(inside, P, capped)
+
+
 def default_disturbance(fs: float, ff_model: Model | None = None, coherence: float = DEFAULT_COHERENCE) -> Disturbance:
     """The documented default (module docstring) at sample rate fs; with ff_model, chin and ear spectra."""
     if not 0.0 < coherence < 1.0:
@@ -103,7 +120,7 @@ def default_disturbance(fs: float, ff_model: Model | None = None, coherence: flo
     source = {"kind": "default wind and engine spectrum", "coherence": coherence}
     if ff_model is None:
         return Disturbance(f, spectrum, source=source)
-    P = ff_model.frequency_response(f)
+    P = _vouched(ff_model, f)
     coherent = np.abs(P) ** 2 * spectrum
     return Disturbance(f, coherent / coherence, spectrum, P * spectrum, source)
 

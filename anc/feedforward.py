@@ -16,6 +16,20 @@ made more than 6 dB louder where the reference is weak), both imposed by reweigh
 (a penalty on |W|^2, the weight of the residual) where they are broken. Restricted to FIR filters this is the fixed point FxLMS converges to (Elliott,
 "Signal Processing for Active Control", Academic Press 2001, sec. 3.3); the remainder
 (1 + G Q) u is the incoherent part the coherence bound -10 log10(1 - coh^2) describes.
+
+Band rule (``BandRule``): a feed-forward filter has no waterbed, so W never makes a band
+louder. In every third-octave band 20 Hz-2 kHz (``anc.prediction``, the bands the
+attenuation is predicted in, summed over the same points) the predicted ear power with W is
+at most ``BAND_TOLERANCE_DB`` (0.1 dB) above the power without it: W alone against no control,
+and W with Q against Q alone. A causal W cannot always help everywhere: when the secondary
+path z^-L S arrives later than the primary path P (random helmet 7: S's delay 39 + L = 1
+against P's 37-38 samples), W must predict the reference, and the prediction error is
+broadband; the unconstrained criterion traded it against the strong low-frequency noise
+and made the weak bands up to 7 dB louder (mean -2.0 dB over 50 Hz-1 kHz). The rule is
+imposed by raising the weight of a band that breaks it (the fit then pulls W towards no
+change there) and guaranteed by scaling W down to the largest factor in [0, 1] that keeps
+every band inside it: a design that cannot help in a band leaves it (nearly) alone, and
+one that cannot help anywhere is W = 0.
 """
 
 from __future__ import annotations
@@ -29,11 +43,16 @@ from sysid.model import Model
 from .basis import LaguerreBasis, fit
 from .disturbance import Disturbance
 from .feedback import RMS_PER_95, design_grid
+from .prediction import band_grid
 from .uncertainty import Uncertainty
 
-__all__ = ["FeedforwardDesign", "design_feedforward"]
+__all__ = ["FeedforwardDesign", "design_feedforward", "BandRule", "BAND_TOLERANCE_DB"]
 
 _ITERATIONS = 20
+# A band may be this much louder with W than without (the rounding of a fit, not a trade; module docstring).
+BAND_TOLERANCE_DB = 0.1
+# The guarantee scales W to this fraction of the tolerance, so the stored (balanced) filter keeps it too.
+_SCALE_MARGIN = 0.5
 
 
 @dataclass
@@ -45,6 +64,77 @@ class FeedforwardDesign:
     frequencies_hz: np.ndarray
     response: np.ndarray
     notes: list[str] = field(default_factory=list)
+
+
+class BandRule:
+    """The band rule (module docstring) on ``anc.prediction.band_grid()``: ear power per band with
+    and without W, for W alone and with Q (``feedback_loop(f)`` = G Q, or None)."""
+
+    def __init__(self, s_model: Model, disturbance: Disturbance, latency: int, feedback_loop=None):
+        fs = s_model.fs
+        grid = band_grid()
+        self.shape = grid.shape
+        self.frequencies_hz = grid.reshape(-1)
+        f = self.frequencies_hz
+        self.G = s_model.frequency_response(f) * np.exp(-2j * np.pi * f * latency / fs)
+        spectra = disturbance.at(f)
+        self.phi = np.maximum(spectra.reference_psd, 0.0)
+        H = spectra.coherent_response()
+        uu = spectra.incoherent_psd()
+        one_plus = 1.0 if feedback_loop is None else 1.0 + feedback_loop(f)
+        # Targets: W alone acts on H x, W with Q on (1 + G Q) H x; the powers without W (per band).
+        self.targets = (H, one_plus * H)
+        self.off = [self._sum(uu + self.phi * np.abs(H) ** 2),
+                    self._sum(np.abs(one_plus) ** 2 * uu + self.phi * np.abs(one_plus * H) ** 2)]
+        self.allowed = 10.0 ** (BAND_TOLERANCE_DB / 10.0) - 1.0
+
+    def _sum(self, values: np.ndarray) -> np.ndarray:
+        return np.sum(np.reshape(values, self.shape), axis=1)
+
+    def _terms(self, W: np.ndarray):
+        """Per case (alone, with Q) and band: the quadratic and linear coefficients of the power
+        W adds, a |GW|^2 + 2 Re(GW T*), so that scaling W by t adds t^2 a + t b."""
+        gw = self.G * W
+        return [(self._sum(self.phi * np.abs(gw) ** 2), self._sum(2.0 * self.phi * np.real(gw * np.conj(T))))
+                for T in self.targets]
+
+    def excess_db(self, W: np.ndarray) -> np.ndarray:
+        """(2, bands): 10 log10 of ear power with W over without it, W alone and with Q (dB, > 0 louder)."""
+        return np.array([10.0 * np.log10(np.maximum(off + a + b, 1e-300) / np.maximum(off, 1e-300))
+                         for off, (a, b) in zip(self.off, self._terms(W))])
+
+    def holds(self, W: np.ndarray) -> bool:
+        """Whether W (its response on ``frequencies_hz``) keeps every band within the tolerance."""
+        return bool(np.all(self.excess_db(W) <= BAND_TOLERANCE_DB))
+
+    def constraints(self, responses: np.ndarray, fraction: float = 1.0) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """The rule as quadratic constraints on real coefficients c of W = responses @ c (responses
+        on ``frequencies_hz``): per case and band (A, b, limit) with c' A c + b' c <= limit =
+        fraction * allowed, each divided by the band's power without W."""
+        M = (self.G[:, None] * responses).reshape(self.shape + (-1,))
+        phi = self.phi.reshape(self.shape)
+        result = []
+        for T, off in zip(self.targets, self.off):
+            Tb = np.reshape(T, self.shape)
+            for band in range(self.shape[0]):
+                Mb = M[band]
+                A = np.real((Mb.conj().T * phi[band]) @ Mb)
+                b = 2.0 * np.real((phi[band] * np.conj(Tb[band])) @ Mb)
+                # Divided by the power without W, so every constraint reads in fractions of its band's power.
+                unit = max(float(off[band]), 1e-300)
+                result.append((A / unit, b / unit, float(fraction * self.allowed)))
+        return result
+
+    def largest_scale(self, W: np.ndarray, fraction: float = 1.0) -> float:
+        """Largest t in [0, 1] with t^2 a + t b <= fraction * allowed * off in every band and case."""
+        t = 1.0
+        for off, (a, b) in zip(self.off, self._terms(W)):
+            c = fraction * self.allowed * off
+            # t^2 a + t b - c <= 0 holds on [0, root] (a >= 0, c >= 0): root = (-b + sqrt(b^2 + 4 a c)) / 2a.
+            with np.errstate(divide="ignore", invalid="ignore"):
+                root = np.where(a > 0, (-b + np.sqrt(b * b + 4.0 * a * c)) / (2.0 * np.where(a > 0, a, 1.0)), np.inf)
+            t = min(t, float(np.min(root)))
+        return max(t, 0.0)
 
 
 def design_feedforward(s_model: Model, disturbance: Disturbance, latency: int, uncertainty: Uncertainty,
@@ -78,9 +168,29 @@ def design_feedforward(s_model: Model, disturbance: Disturbance, latency: int, u
         penalty[over] = np.maximum(penalty[over], 1e-3 * scale) * excess[over] ** 4
         over = amplification > 1.0
         weight[over] = np.maximum(weight[over], 1e-3 * phi.max()) * amplification[over] ** 4
+    rule = BandRule(s_model, disturbance, latency, feedback_loop)
+    rule_basis = basis.responses(rule.frequencies_hz, fs)
+    fitted = rule.excess_db(rule_basis @ c).max()
+    if fitted > BAND_TOLERANCE_DB:
+        # The same criterion (the last weights and penalties) with the band rule as constraints.
+        c = fit(basis_f, G, target, weight, phi * s2 * np.abs(G) ** 2 + penalty + 1e-9 * scale,
+                rule.constraints(rule_basis, _SCALE_MARGIN))
     notes = []
     if np.abs(W).max() > bound:
         c = c * bound / np.abs(W).max()
         W = basis_f @ c
         notes.append(f"W scaled to the gain bound {max_gain_db:g} dB")
+    if fitted > BAND_TOLERANCE_DB:
+        notes.append(f"W fitted under the band rule: unconstrained it made a band {fitted:.2f} dB louder (the rule "
+                     f"allows {BAND_TOLERANCE_DB:g} dB: W never makes a band 20 Hz-2 kHz louder, alone or with Q)")
+    t = rule.largest_scale(rule_basis @ c, _SCALE_MARGIN) if not rule.holds(rule_basis @ c) else 1.0
+    if t < 1.0:
+        c = c * t
+        W = basis_f @ c
+        notes.append(f"W scaled by {t:.3f} to keep the band rule")
+    louder = rule.excess_db(rule_basis @ c)
+    held = louder.max(axis=0) < -BAND_TOLERANCE_DB
+    if not np.any(held):
+        notes.append("W reduces no band by more than the band rule's tolerance: the reference cannot be "
+                     "used causally here (the secondary path arrives after the noise it would cancel)")
     return FeedforwardDesign(basis, c, f, W, notes)

@@ -42,7 +42,7 @@ from sysid.errors import HelmetAncError
 from sysid.thresholds import IDENTIFICATION_BAND
 from sysid.model import Model
 
-__all__ = ["Uncertainty", "model_uncertainty", "DEFAULT_IN_BAND", "OUTSIDE_BAND", "LINEARISATION_LIMIT",
+__all__ = ["Uncertainty", "model_uncertainty", "stated_band", "DEFAULT_IN_BAND", "OUTSIDE_BAND", "LINEARISATION_LIMIT",
            "MAX_VALIDATION_RATIO"]
 
 DEFAULT_IN_BAND = 0.2
@@ -121,11 +121,28 @@ def _with_peak(model: Model, base: Uncertainty) -> Uncertainty:
                        float(np.max(vouched)))
 
 
-def model_uncertainty(model: Model) -> Uncertainty:
-    """The uncertainty a design must respect for ``model`` (module docstring)."""
+def _stated_field(model: Model) -> dict | None:
     stated = getattr(model, "uncertainty", None)
     if stated is None and isinstance(model.identification, dict):
         stated = model.identification.get("uncertainty")
+    return stated or None
+
+
+def stated_band(model: Model) -> tuple[float, float]:
+    """(lowest, highest) frequency in Hz the model is vouched for: its uncertainty field's range, else
+    its identification band, else ``sysid.thresholds.IDENTIFICATION_BAND`` (``model_uncertainty``'s band)."""
+    stated = _stated_field(model)
+    if stated:
+        f = np.asarray(stated["frequencies_hz"], dtype=float)
+        return float(f.min()), float(f.max())
+    if isinstance(model.identification, dict) and model.identification.get("band_hz"):
+        return tuple(float(v) for v in model.identification["band_hz"])
+    return tuple(float(v) for v in IDENTIFICATION_BAND)
+
+
+def model_uncertainty(model: Model) -> Uncertainty:
+    """The uncertainty a design must respect for ``model`` (module docstring)."""
+    stated = _stated_field(model)
     if stated:
         f = np.asarray(stated["frequencies_hz"], dtype=float)
         r = np.asarray(stated["relative_95"], dtype=float)
@@ -140,9 +157,7 @@ def model_uncertainty(model: Model) -> Uncertainty:
         raise HelmetAncError(f"the {model.path.upper()} model validates at {rms / floor:.1f}x the noise floor "
                              f"(above {MAX_VALIDATION_RATIO:g}x) and states no uncertainty band: its error is unknown, "
                              "so no controller can be guaranteed stable with it; diagnose and refine it first")
-    band = IDENTIFICATION_BAND
-    if isinstance(model.identification, dict) and model.identification.get("band_hz"):
-        band = tuple(float(v) for v in model.identification["band_hz"])
+    band = stated_band(model)
     f = np.array(band, dtype=float)
     return _with_peak(model, Uncertainty(f, np.full(2, DEFAULT_IN_BAND), (float(band[0]), float(band[1])),
                                          f"default {DEFAULT_IN_BAND:.0%} inside the identification band (no uncertainty field)"))
