@@ -10,7 +10,8 @@ Every refinement is validated with ``compare`` before and after and appended to 
 model's ``history``; a refit that is unstable raises, and one that makes the
 validation error worse is flagged (``step["worse"]``) and, in ``refine_auto``, rejected.
 ``refine_auto`` repeats diagnose -> add the top significant finding -> refit,
-monotone and bounded (see its docstring).
+monotone and bounded (see its docstring); the data corrections it finds pending
+are applied together, then one re-identification (``refine_corrections``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from . import effects as registry
+from . import refits
 from .compare import Comparison, compare
 from .diagnose import diagnose
 from .effect_spec import EffectSpec, parse_effect
@@ -31,7 +33,7 @@ from .refits import REFIT_OPTIONS, detector_context
 from .thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT_S, WORSE
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
-           "refine", "refine_auto", "format_refinement", "parse_refinement"]
+           "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement"]
 
 
 class _RegistryView(Mapping):
@@ -136,15 +138,45 @@ def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, opti
     before = before or compare(model, sweeps)
     params = _complete(spec, model, noise, sweeps, before, transient_s)
     refined, extra = registry.get(spec.kind).build(model, noise, sweeps, params, options, transient_s)
+    return _refinement(model, refined, spec.kind, params, extra, before, sweeps)
+
+
+# ``refine_corrections`` applies the clock correction first: the others are read on the ear signal it resamples.
+def _correction_rank(spec: EffectSpec) -> int:
+    return 0 if spec.kind == "clock-drift" else 1
+
+
+def refine_corrections(model: Model, noise: Recording, sweeps: list[Recording], specs: list[EffectSpec],
+                       options: IdentificationOptions | None = None, transient_s: float = TRANSIENT_S,
+                       before: Comparison | None = None) -> Refinement:
+    """Apply several data corrections (effects of kind "correction": clock ratio, clipped stretches,
+    output offset) and re-identify once, on data corrected for all of them (``sysid.refits.correct_data``).
+
+    One step in the history, its ``effect`` the corrections' names joined by "+" (the clock first),
+    its ``params`` theirs together.
+    """
+    before = before or compare(model, sweeps)
+    specs = sorted(specs, key=_correction_rank)
+    for spec in specs:
+        if registry.get(spec.kind).correct is None:
+            raise IdentificationError(f"--add {spec.kind}: not a data correction")
+    completed = [(registry.get(s.kind).correct, _complete(s, model, noise, sweeps, before, transient_s)) for s in specs]
+    refined, extra = refits.correct_data(model, noise, sweeps, completed, options, transient_s)
+    params = {k: v for _, p in completed for k, v in p.items()}
+    return _refinement(model, refined, "+".join(s.kind for s in specs), params, extra, before, sweeps)
+
+
+def _refinement(model, refined, kind, params, extra, before, sweeps) -> Refinement:
+    """The refined model validated, its step recorded in its history."""
     if not refined.stable:
-        raise IdentificationError(f"refining with {spec.kind} gave an unstable model (pole radius "
+        raise IdentificationError(f"refining with {kind} gave an unstable model (pole radius "
                                   f"{refined.spectral_radius:.6f}); the model is left unchanged")
     after = compare(refined, sweeps)
-    if refined.delay != model.delay and spec.kind != "delay":
+    if refined.delay != model.delay and kind != "delay":
         # The re-identification found latency beyond the model's delay (identify's estimate on the
         # data behind it); the step says so, since the delay line changed with the structure.
         extra = {**extra, "total_delay_samples": refined.delay}
-    step = RefinementStep(spec.kind, {**{k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}, **extra},
+    step = RefinementStep(kind, {**{k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}, **extra},
                           before.rms, after.rms, before.noise_floor, after.noise_floor, model.order, refined.order,
                           worse=bool(after.rms > WORSE * before.rms))
     refined.history = list(model.history) + [step.to_dict()]
@@ -180,10 +212,25 @@ class AutoRefinement:
     after: Comparison
 
 
-def _step_key(spec: EffectSpec, model: Model) -> str:
-    """What makes two steps the same: effect and parameters, and the model they start from (its history)."""
-    return json.dumps({"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()},
-                       "order": model.order, "from": len(model.history)}, sort_keys=True)
+def _step_key(specs: list[EffectSpec], model: Model) -> str:
+    """What makes two steps the same: effects and parameters, and the model they start from (its history)."""
+    return json.dumps({"effects": [{"effect": spec.kind, "params": {k: _brief(v) for k, v in spec.params.items()}}
+                                   for spec in specs], "order": model.order, "from": len(model.history)},
+                      sort_keys=True)
+
+
+def _passes(accept: str, before: Comparison, after: Comparison, needed: float) -> bool:
+    """Whether a step lowered the error by an effect's rule (``Effect.accept``); ``needed``: the run-to-run
+    noise of the validation rms (FS)."""
+    if accept == "full-band":
+        # An offset lives at DC, outside the validation band: it must lower the full-band rms
+        # and leave the in-band rms within its run-to-run noise.
+        return after.rms_full < (1.0 - RUN_TO_RUN_MIN) * before.rms_full and after.rms <= before.rms + needed
+    if accept == "not-worse":
+        # The errors-in-variables estimator removes a bias of the response that the validation
+        # rms cannot show (the sweeps' own input noise passes through the path); kept unless worse.
+        return after.rms <= before.rms + needed
+    return after.rms < before.rms - needed
 
 
 def _allowed(effect: str, rejected: dict[str, int], retried: set[str], accepted: int) -> bool:
@@ -202,7 +249,10 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     ``RUN_TO_RUN_MIN`` of it). An effect whose step is not kept (or fails) stays
     rejected (tried at most once more after a later accepted step changed the model), no
     step (effect and parameters from the same model) is tried twice, and there are at most
-    ``max_steps`` steps. ``stop_reason`` says why it stopped: "at the floor",
+    ``max_steps`` steps. The data corrections pending at a step (clock ratio, clipped
+    stretches, output offset: effects with a ``correct``) are applied together before one
+    re-identification (``refine_corrections``), one step naming each; kept when it passes
+    the rule of any of them, and tried one at a time if not. ``stop_reason`` says why it stopped: "at the floor",
     "nothing left that lowers the error", "effects that cannot be modelled: ...".
     """
     start = current = compare(model, sweeps)
@@ -233,48 +283,50 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             candidates = [f for f in candidates if f["effect"] != "input-noise"]
         candidates.sort(key=lambda f: f["effect"] not in corrections)
         specs = [(f, _auto_spec(f)) for f in candidates]
-        specs = [(f, spec) for f, spec in specs if _step_key(spec, model) not in tried]
+        specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
         if not specs and not at_floor and _allowed("under-modelled", rejected, retried, accepted):
             # Everything named was tried and the error is still above the floor: more order is what is
             # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
             fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
-            specs = [(fallback, spec) for spec in [_auto_spec(fallback)] if _step_key(spec, model) not in tried]
+            specs = [(fallback, spec) for spec in [_auto_spec(fallback)] if _step_key([spec], model) not in tried]
         if not specs:
             stop_reason = ("effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
                            else "nothing left that lowers the error")
             break
-        found, spec = specs[0]
-        tried.add(_step_key(spec, model))
-        if spec.kind in rejected:
-            retried.add(spec.kind)
+        # Every pending data correction (clock ratio, clipped stretches, offset) in one step before one
+        # re-identification: each alone would re-identify on data that still hold the others. Once that
+        # combination was tried (and not kept), they are tried one at a time.
+        data = [(f, spec) for f, spec in specs if registry.get(spec.kind).correct is not None]
+        choice = data if len(data) >= 2 and _step_key([s for _, s in data], model) not in tried else specs[:1]
+        chosen = [spec for _, spec in choice]
+        score = max(f["score"] for f, _ in choice)
+        combined = len(chosen) > 1
+        tried.add(_step_key(chosen, model))
+        if not combined and chosen[0].kind in rejected:
+            retried.add(chosen[0].kind)
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
-            result = refine(model, noise, sweeps, spec, options, transient_s, current)
+            result = (refine_corrections(model, noise, sweeps, chosen, options, transient_s, current) if combined
+                      else refine(model, noise, sweeps, chosen[0], options, transient_s, current))
         except HelmetAncError as exc:
             # An unstable or failed refit is reported as a rejected step, never returned.
-            steps.append(RefinementStep(spec.kind, dict(spec.params), current.rms, current.rms, current.noise_floor,
-                                        current.noise_floor, model.order, model.order, accepted=False,
-                                        score=found["score"], note=str(exc)))
-            rejected[spec.kind] = accepted
+            params = {k: v for s in chosen for k, v in s.params.items()}
+            steps.append(RefinementStep("+".join(s.kind for s in chosen), params, current.rms, current.rms,
+                                        current.noise_floor, current.noise_floor, model.order, model.order,
+                                        accepted=False, score=score, note=str(exc)))
+            if not combined:
+                rejected[chosen[0].kind] = accepted
             continue
         step = result.step
-        step.score = found["score"]
-        step.accepted = result.after.rms < current.rms - needed
-        accept = registry.get(spec.kind).accept
-        if accept == "full-band":
-            # An offset lives at DC, outside the validation band: it must lower the full-band rms
-            # and leave the in-band rms within its run-to-run noise.
-            step.accepted = (result.after.rms_full < (1.0 - RUN_TO_RUN_MIN) * current.rms_full
-                             and result.after.rms <= current.rms + needed)
-        if accept == "not-worse":
-            # The errors-in-variables estimator removes a bias of the response that the validation
-            # rms cannot show (the sweeps' own input noise passes through the path); kept unless worse.
-            step.accepted = result.after.rms <= current.rms + needed
+        step.score = score
+        # A combined correction is kept when it passes the rule of any correction it applies.
+        step.accepted = any(_passes(registry.get(s.kind).accept, current, result.after, needed) for s in chosen)
         if not step.accepted:
             step.note = (f"lowered the rms by {current.rms - result.after.rms:.2e} FS, not more than the run-to-run "
                          f"noise {needed:.2e} FS" if result.after.rms < current.rms else
                          "validation error unchanged" if result.after.rms == current.rms else "validation error rose")
-            rejected[spec.kind] = accepted
+            if not combined:
+                rejected[chosen[0].kind] = accepted
         steps.append(step)
         if step.accepted:
             model = result.model

@@ -264,3 +264,25 @@ def test_a_refit_whose_warm_start_reaches_the_floor_skips_the_re_identification(
     assert _refit(session.sweeps, [model], reidentify) is model
     worse = Model(**{**model.__dict__, "delay": model.delay + 5})
     assert _refit(session.sweeps, [worse], lambda: model) is model
+
+
+def test_auto_applies_the_pending_data_corrections_together_before_one_re_identification():
+    # The README's rig, short: an ear clock 60 ppm fast, a preamplifier clipping at 0.4 FS and an
+    # offset. One step names all three (the clock first) and ends at the floor at the path's order.
+    session, model = effect_case("ff", 7, ("clock-drift:60", "clipping:1.4,0.4", "dc-offset:0.01"))
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    text = format_refinement(auto.steps, auto.stop_reason)
+    first = auto.steps[0]
+    assert first.effect == "clock-drift+clipping+dc-offset" and first.accepted, text
+    assert first.params["ppm"] == pytest.approx(60.0, rel=0.02) and first.params["offset_fs"] == pytest.approx(0.01, rel=0.05)
+    assert max(first.params["excluded_fraction"]) > 0.1, text
+    assert auto.after.ratio <= 1.2 and auto.model.order <= model.order + 2, text
+    assert auto.model.history[0]["effect"] == first.effect
+
+
+def test_refine_corrections_refuses_a_structure():
+    from sysid.effect_spec import EffectSpec
+    from sysid.refine import refine_corrections
+    session, model = effect_case("ff", 3, ())
+    with pytest.raises(HelmetAncError, match="delay: not a data correction"):
+        refine_corrections(model, session.noise, session.sweeps, [EffectSpec("delay", {"samples": 3})], TEST_REFIT)

@@ -51,7 +51,9 @@ class Effect:
     the step - "in-band" (the validation rms falls by more than its run-to-run noise),
     "full-band" (an offset at DC: the full-band rms falls, the in-band rms does not rise),
     "not-worse" (removes a bias the rms cannot show); ``not_refinable`` says why there is
-    no structure.
+    no structure. ``correct(model, noise, sweeps, params) -> (model, extra params)``: a data
+    correction alone, the core kept (no re-identification); ``refine --auto`` applies every
+    pending correction this way before one re-identification (``sysid.refits.correct_data``).
     ``factor(params, fs) -> (b, a)``: the effect is a linear factor in series with
     the plant (how ``simulate`` adds it; the other built-in effects act on the
     recordings and are simulated by ``sysid.simulate`` itself). ``random(rng) ->
@@ -70,6 +72,7 @@ class Effect:
     needs_all: bool = False
     build: Callable | None = None
     complete: Callable | None = None
+    correct: Callable | None = None
     accept: str = "in-band"
     not_refinable: str = ""
     auto_params: Callable[[dict], dict] | None = None
@@ -85,6 +88,8 @@ class Effect:
             raise HelmetAncError(f"effect {self.name}: kind must be structure, correction, disturbance or report")
         if self.accept not in ("in-band", "full-band", "not-worse"):
             raise HelmetAncError(f"effect {self.name}: accept must be in-band, full-band or not-worse")
+        if self.correct is not None and self.kind != "correction":
+            raise HelmetAncError(f"effect {self.name}: only a correction (kind 'correction') has a correct")
         if self.build is not None and self.refine_params is None:
             raise HelmetAncError(f"effect {self.name}: a structure needs its refine_params (may be empty)")
 

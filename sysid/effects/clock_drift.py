@@ -11,7 +11,7 @@ from __future__ import annotations
 from ..effect_spec import ParameterSpec
 from ..errors import IdentificationError
 from ..findings.variation import clock_drift_finding
-from ..refits import add_clock_drift
+from ..refits import add_clock_drift, with_clock_drift
 from . import Effect, register
 
 __all__ = ["CLOCK_DRIFT"]
@@ -35,5 +35,5 @@ CLOCK_DRIFT = register(Effect(
     name="clock-drift", summary="ear clock against input clock, parts per million (positive: ear fast)",
     simulate_params=(ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
     refine_params=(ParameterSpec("ppm", None, -5000.0, 5000.0),),
-    detect=clock_drift_finding, build=add_clock_drift, complete=_complete, auto_params=lambda p: {"ppm": p["ppm"]},
+    detect=clock_drift_finding, build=add_clock_drift, correct=with_clock_drift, complete=_complete, auto_params=lambda p: {"ppm": p["ppm"]},
     kind="correction", figure="segments", random=_random))

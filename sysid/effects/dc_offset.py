@@ -11,7 +11,7 @@ from __future__ import annotations
 from ..effect_spec import ParameterSpec
 from ..errors import IdentificationError
 from ..findings.data_quality import dc_offset_finding
-from ..refits import add_dc_offset
+from ..refits import add_dc_offset, with_dc_offset
 from . import Effect, register
 
 __all__ = ["DC_OFFSET"]
@@ -34,6 +34,6 @@ DC_OFFSET = register(Effect(
     name="dc-offset", summary="offset of a channel (FS): preamplifier offset, microphone bias",
     simulate_params=(ParameterSpec("level", 0.01, -0.5, 0.5), ParameterSpec("channel", 1, 0, 1, "int")),
     refine_params=(ParameterSpec("offset_fs", None, -1.0, 1.0),),
-    detect=dc_offset_finding, build=add_dc_offset, complete=_complete,
+    detect=dc_offset_finding, build=add_dc_offset, correct=with_dc_offset, complete=_complete,
     auto_params=lambda p: {"offset_fs": p["ear_offset_fs"]}, kind="correction", accept="full-band",
     figure="levels", random=_random))
