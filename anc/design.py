@@ -8,6 +8,13 @@ lowest order that keeps the design (``_lowest_order``): Q first, then W with tha
 predictions per band (``anc.prediction``) for W alone, Q alone and both, made with the filters
 as stored.
 
+Refused: an FB model with a pole within ``UNDAMPED_MARGIN`` (1e-6) of the unit circle (an
+identification defect; see the constant). Robustness between grid points: the stored Q's
+r_95 |S_model Q| is evaluated on ``anc.feedback.dense_grid`` (every FFT bin of 65536 points,
+log-spaced points from 0.1 Hz and each model pole's peak); where it exceeds ``DENSE_MARGIN``
+(0.99) times the bound 0.5, Q is scaled down to it. The margin on that grid is
+``margins["robustness_factor_dense"]`` (0.5 over the largest r_95 |S_model Q|; >= 1 / 0.99 unless scaled).
+
 Truncation (balanced truncation, Moore 1981; for Q of the Laguerre sum only, then the fixed
 DC block in series, so Q keeps its double zero at DC whatever the order): the smallest order
 whose predicted attenuation in every third-octave band of ``TRUNCATION_BANDS_HZ`` is within
@@ -36,12 +43,13 @@ from sysid.structures import series, tf_to_statespace
 from .basis import LaguerreBasis
 from .controller import Controller, StateSpaceFilter
 from .disturbance import Disturbance, default_disturbance
-from .feedback import ROBUSTNESS_BOUND, design_feedback, design_grid, loop_margins
+from .feedback import ROBUSTNESS_BOUND, dense_grid, design_feedback, design_grid, loop_margins
 from .feedforward import BAND_TOLERANCE_DB, BandRule, design_feedforward
 from .prediction import band_attenuation, band_centres, band_grid, coherence_bound, ear_psd, overall_dba
 from .uncertainty import Uncertainty, model_uncertainty
 
-__all__ = ["DesignOptions", "design", "predict", "TRUNCATION_TOLERANCE_DB", "TRUNCATION_BANDS_HZ"]
+__all__ = ["DesignOptions", "design", "predict", "TRUNCATION_TOLERANCE_DB", "TRUNCATION_BANDS_HZ", "UNDAMPED_MARGIN",
+           "undamped_pole"]
 
 # A truncated filter may change the predicted attenuation of a band by this much: a tenth of the
 # 1 dB the board's attenuation must match the design within (issue 14), so the truncation is a
@@ -49,6 +57,17 @@ __all__ = ["DesignOptions", "design", "predict", "TRUNCATION_TOLERANCE_DB", "TRU
 # noise (wind, engine) is controlled in.
 TRUNCATION_TOLERANCE_DB = 0.1
 TRUNCATION_BANDS_HZ = (50.0, 1000.0)
+# An FB model pole closer than this to the unit circle (a mode decaying by 1/e in over 1e6 samples,
+# 20 s at 48 kHz) is refused: no acoustic path rings that long (the seed's FB path's slowest pole is
+# 1 - 1e-4), and the runtime runs the internal model as given, so the loop d_hat = d + (S - S_model) y
+# carries the model's resonance (random helmet 9: a pair at 22000.918 Hz with radius 1 - 1e-9 gives
+# |S_model| = 2.5e8 there against |S| = 0.0075; |Delta Q| = 3.4e4 within 1e-3 Hz of it, between the
+# design grid's points, where the grid saw 0.48; closed-loop poles at radius 1.00003: unstable).
+UNDAMPED_MARGIN = 1e-6
+# Where r95 |S_model Q| exceeds this fraction of the bound on the dense grid (``anc.feedback.dense_grid``),
+# Q is scaled down to it: 1 % for what lies between the dense grid's points (a 4x finer grid found 0.07 %
+# more than the dense grid on the seed).
+DENSE_MARGIN = 0.99
 
 
 @dataclass(frozen=True)
@@ -68,6 +87,19 @@ class DesignOptions:
     feedforward: bool = True
     # False: keep the full order (every state with a Hankel singular value above 1e-9 of the largest).
     truncate: bool = True
+
+
+def undamped_pole(model: Model) -> tuple[float, float] | None:
+    """(radius, frequency in Hz) of the model's pole nearest the unit circle if it lies within
+    ``UNDAMPED_MARGIN`` of it, else None."""
+    if not model.order:
+        return None
+    poles = np.linalg.eigvals(model.A)
+    nearest = int(np.argmax(np.abs(poles)))
+    radius = float(np.abs(poles[nearest]))
+    if 1.0 - radius >= UNDAMPED_MARGIN:
+        return None
+    return radius, abs(float(np.angle(poles[nearest]))) * model.fs / (2.0 * np.pi)
 
 
 def _laguerre_order(basis: LaguerreBasis, coefficients: np.ndarray) -> int:
@@ -165,6 +197,12 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     if not fb_model.stable:
         raise HelmetAncError(f"the FB model is unstable (largest pole radius {fb_model.spectral_radius:.6f}); "
                              "identify or refine it again before designing a controller")
+    undamped = undamped_pole(fb_model)
+    if undamped is not None:
+        radius, hz = undamped
+        raise HelmetAncError(f"the FB model has an undamped pole at {hz:.0f} Hz (radius 1 - {1.0 - radius:.1e}; a mode "
+                             f"ringing for over {1.0 / UNDAMPED_MARGIN:.0e} samples, which no acoustic path does): the "
+                             "controller's internal model would keep it ringing; identify or refine the FB model again")
     if ff_model is not None:
         if ff_model.path != "ff":
             raise HelmetAncError(f"the feed-forward model must be an FF model (chin -> ear); found path {ff_model.path!r}")
@@ -200,16 +238,38 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             on = bands(candidate, None)
             return float(np.max(np.abs(on["fb"] - reference["fb"])))
 
+        # The dense check (``dense_grid``): the stored Q is scaled to DENSE_MARGIN of the bound where it
+        # comes closer on it, and a truncated Q may come no closer than the full order does.
+        dense = dense_grid(fb_model)
+        Gd = fb_model.frequency_response(dense) * np.exp(-2j * np.pi * dense * options.latency / fb_model.fs)
+        r95_dense = uncertainty.at(dense)
+        dense_bound = max(DENSE_MARGIN * ROBUSTNESS_BOUND,
+                          float(np.max(r95_dense * np.abs(Gd * full_fb.frequency_response(dense, fb_model.fs)))))
+
         def fb_admissible(candidate):
             loop = G * candidate.frequency_response(f, fb_model.fs)
             return (np.max(fb_design.relative_95 * np.abs(loop)) <= ROBUSTNESS_BOUND
-                    and np.max(np.abs(1.0 + loop)) <= peak_bound)
+                    and np.max(np.abs(1.0 + loop)) <= peak_bound
+                    and np.max(r95_dense * np.abs(Gd * candidate.frequency_response(dense, fb_model.fs))) <= dense_bound)
 
         fb, truncation["fb"] = _lowest_order(fb_basis, fb_design.coefficients, fb_change, fb_admissible,
                                               options.truncate)
+        # The bound between the design grid's points (``dense_grid``: FFT bins, log-spaced points and
+        # each model pole's peak): Q is scaled down to DENSE_MARGIN of it if it comes closer there.
+        usage = r95_dense * np.abs(Gd * fb.frequency_response(dense, fb_model.fs))
+        worst = int(np.argmax(usage))
+        if usage[worst] > DENSE_MARGIN * ROBUSTNESS_BOUND:
+            factor = DENSE_MARGIN * ROBUSTNESS_BOUND / float(usage[worst])
+            fb = StateSpaceFilter(fb.A, fb.B, fb.C * factor, fb.D * factor)
+            notes.append(f"Q scaled by {factor:.3f}: r95 |S_model Q| reached {usage[worst]:.3f} at "
+                         f"{dense[worst]:.2f} Hz between the design grid's points")
+            usage = usage * factor
         # Margins of the stored (balanced, truncated) filter, not of the coefficients.
         loop = G * fb.frequency_response(f, fb_model.fs)
         margins = loop_margins(loop, f, fb_design.relative_95, loop)
+        margins["robustness_factor_dense"] = float(ROBUSTNESS_BOUND / max(float(usage.max()), 1e-300))
+        margins["robustness_worst_hz"] = float(dense[int(np.argmax(usage))])
+        margins["robustness_points"] = int(dense.size)
         notes += fb_design.notes
 
         def loop_fn(frequencies):

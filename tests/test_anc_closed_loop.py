@@ -8,8 +8,11 @@ import pytest
 from anc import design
 from sysid.errors import HelmetAncError
 from anc.closed_loop import run_closed_loop, verify
+from anc.design import undamped_pole
 from anc.disturbance import default_disturbance
+from anc.feedback import ROBUSTNESS_BOUND
 from anc.prediction import band_centres
+from anc.uncertainty import model_uncertainty
 from sysid.identify import identify
 from sysid.plants import appendix_a_model
 from sysid.random_plant import random_plant, random_session
@@ -29,10 +32,29 @@ class ShortOfTruth(AssertionError):
     """Stable and as predicted, but more than 1 dB below the design on the true plants (50 Hz-1 kHz)."""
 
 
+def dense_usage(controller, uncertainty, bins=2**17):
+    """r95 |S_model Q| of the stored Q on a grid 4 times finer than the design's dense check
+    (``anc.feedback.dense_grid``) and 201 points over +-4 bandwidths of each model pole."""
+    model, fs = controller.internal_model, controller.fs
+    poles = np.linalg.eigvals(model.A)
+    centre = np.abs(np.angle(poles)) * fs / (2 * np.pi)
+    width = np.maximum(np.abs(np.log(np.abs(poles))) * fs / np.pi, 1e-6)
+    f = np.concatenate((np.linspace(0.0, fs / 2, bins + 1),
+                        (centre[:, None] + 4 * width[:, None] * np.linspace(-1, 1, 201)).reshape(-1)))
+    f = f[(f >= 0) & (f <= fs / 2)]
+    G = model.frequency_response(f) * np.exp(-2j * np.pi * f * controller.latency_samples / fs)
+    return f, uncertainty.at(f) * np.abs(G * controller.fb.frequency_response(f, fs))
+
+
 def _check(s_true, p_true, s_id, p_id, seed=0):
+    """Issue 13's checks. The limit is the same design made on the true plants like for like: the same
+    settings and the uncertainty band the design under test was given (the identified FB model's)."""
     disturbance = default_disturbance(s_id.fs, p_id)
     ours = design(s_id, p_id, disturbance)
-    limit = design(s_true, p_true, default_disturbance(s_true.fs, p_true))
+    limit = design(s_true, p_true, default_disturbance(s_true.fs, p_true), uncertainty=model_uncertainty(s_id))
+    f, usage = dense_usage(ours, model_uncertainty(s_id))
+    assert usage.max() <= ROBUSTNESS_BOUND * (1 + 1e-9), \
+        f"r95 |S_model Q| = {usage.max():.3f} at {f[np.argmax(usage)]:.3f} Hz, between the design's check points"
     results = verify(ours, limit, s_true, p_true, disturbance, seconds=2.0, seed=seed)
     for r in results:
         assert r.stable, f"{r.part}: closed loop unstable (largest pole {r.largest_pole:.6f})"
@@ -72,37 +94,25 @@ def _check_random(seed):
         with pytest.raises(HelmetAncError, match="noise floor"):
             design(s_id, p_id)
         return
+    if undamped_pole(s_id) is not None:
+        # An identification defect (a mode within 1e-6 of the unit circle): refused, with the reason.
+        with pytest.raises(HelmetAncError, match="undamped pole"):
+            design(s_id, p_id)
+        return
     _check(s_session.plant, p_session.plant, s_id, p_id, seed=seed)
 
 
 # Helmets whose design is stable and achieves what it predicts but falls more than 1 dB short of the
-# design on the true plants, and why (BENCHMARKS.md, Control).
-SHORT_OF_TRUTH = {
-    1: "identify's FB model (76d30b9) is order 7 against the true 12 and delay 57 against 60, validating at 24.8x "
-       "its noise floor; its true error is 0.5-2.0 |S_model| at 20-120 Hz and its band states 0.7-1.5 there, so the "
-       "design must leave the wind noise alone (both: 0.2 dB against 1.8 dB for the true-plant design)",
-    5: "not the model: its bands are <= 0.03 % (FB) and <= 3 % (FF) and cover; the true-plant design is made with "
-       "the default 20 % band, and given the identified FB model's own band it reaches 10.94 dB (both) like ours "
-       "(10.97) against 12.08: the narrower band lets Q trade band-mean dB for disturbance-weighted power",
-    7: "measured by bench_control (2026-11-23 15:33): ff -2.1 dB achieved (-2.0 predicted) against -0.1 for the "
-       "true-plant design, stable; the same comparison as 5 (narrow stated band against the default 20 %) suspected",
-}
-# Identification defects that make the stability verdict itself fail (not fixed in anc).
-UNSTABLE_VERDICT = {
-    9: "the identified FB model has an undamped pole pair at fs/2 (radius 1 to 8 digits); the loop's eigenvalues "
-       "there come out at 1.000009 although max |(S - S_model) Q| is 0.48, so small gain says stable",
-}
+# like-for-like design on the true plants, and why (BENCHMARKS.md, Control). None at present: 5 and 7
+# came within 1 dB (7: the FF band rule and the FF model's gain capped outside its band; 5: the limit
+# made with the identified model's band), and 1 and 9 are refused (their identified FB models have
+# poles at radius 1 - 1e-9: undamped modes, ``anc.design.UNDAMPED_MARGIN``).
+SHORT_OF_TRUTH: dict[int, str] = {}
 
 
 def _random_cases(seeds):
-    cases = []
-    for seed in seeds:
-        if seed in SHORT_OF_TRUTH:
-            seed = pytest.param(seed, marks=pytest.mark.xfail(strict=True, raises=ShortOfTruth, reason=SHORT_OF_TRUTH[seed]))
-        elif seed in UNSTABLE_VERDICT:
-            seed = pytest.param(seed, marks=pytest.mark.xfail(strict=True, reason=UNSTABLE_VERDICT[seed]))
-        cases.append(seed)
-    return cases
+    return [pytest.param(seed, marks=pytest.mark.xfail(strict=True, raises=ShortOfTruth, reason=SHORT_OF_TRUTH[seed]))
+            if seed in SHORT_OF_TRUTH else seed for seed in seeds]
 
 
 @pytest.mark.parametrize("seed", _random_cases([3]))
