@@ -6,6 +6,7 @@ import pytest
 from sysid import lti
 from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay
 from sysid.model import Model
+from sysid.output_error import block_data, linear_cost, refine_output_error
 from sysid.random_plant import random_plant, random_session
 from sysid.recordings import Recording
 from sysid.spectra import estimate_spectra
@@ -67,6 +68,40 @@ class TestRefineDelay:
         assert 9 <= extra <= 11
         assert costs.size == 13 and costs[0] > 1.5 * costs.min()
 
+    @pytest.mark.parametrize("seed", [0, 3, 12])
+    def test_a_delay_read_long_is_shortened(self, seed):
+        # The true poles behind a delay 3 samples too long: the core cannot be causal, the
+        # fixed-pole cost falls below the onset's delay, and the refitted costs find the true delay.
+        rp = random_plant(seed)
+        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
+        body = compensate_delay(session.noise.trimmed(3.0), rp.delay + 3)
+        extra, costs = refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0, delay=rp.delay + 3)
+        assert extra == -3
+        # Refitted at j = -4..0, lowest first; nothing above the onset's delay.
+        assert costs.size == 9 and np.all(np.isfinite(costs[:5])) and np.all(np.isinf(costs[5:]))
+        assert np.argmin(costs) == 1
+        # Never below a total delay of zero: with 1 sample taken out, at most that one comes back.
+        assert -1 <= refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0, delay=1)[0] <= 0
+        assert refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0)[0] >= 0
+
+    def test_a_cost_that_dips_past_the_answer_is_refitted(self):
+        # A core fitted 3 samples short with only two spare poles imitates the missing samples
+        # roughly: held fixed, its cost is lowest at the short delay, rises and dips again near
+        # the true one; refitted at the answer and the dips, the poles find it.
+        rp = random_plant(0)
+        session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
+        short = compensate_delay(session.noise.trimmed(3.0), rp.delay - 3)
+        poles = np.concatenate([np.linalg.eigvals(rp.model.A), [0.3, -0.3]])
+        n = poles.size
+        fit = refine_output_error(lti.real_block_diagonal(poles), np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)),
+                                  block_data(short, (20.0, 5000.0), 1.0))
+        fixed = np.array([linear_cost(fit.A, block_data(compensate_delay(short, j), (20.0, 5000.0), 1.0))
+                          for j in range(5)])
+        assert np.argmin(fixed) == 0 and fixed[1] > 1.5 * fixed[0] and fixed[3] < fixed[2] < fixed[1]
+        extra, costs = refine_delay(fit.A, short, (20.0, 5000.0), 1.0, delay=rp.delay - 3)
+        assert extra == 3
+        assert np.argmin(costs) == 3 and np.isinf(costs).any()
+
     def test_a_delay_already_right_stays(self):
         rp = random_plant(0)
         session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
@@ -81,3 +116,7 @@ def test_compensate_delay_aligns_the_ear_signal():
     shifted = compensate_delay(recording, 3)
     np.testing.assert_array_equal(shifted.u, shifted.y)
     assert compensate_delay(recording, 0) is recording
+    # A negative shift delays the ear signal: 2 of the 3 samples taken out come back, 2 samples shorter.
+    back = compensate_delay(shifted, -2)
+    assert back.u.size == back.y.size == 5
+    np.testing.assert_array_equal(back.y[2:], back.u[:3])
