@@ -8,8 +8,8 @@ lowest order that keeps the design (``_lowest_order``): Q first, then W with tha
 predictions per band (``anc.prediction``) for W alone, Q alone and both, made with the filters
 as stored.
 
-Refused: an FB model with a pole within ``UNDAMPED_MARGIN`` (1e-6) of the unit circle (an
-identification defect; see the constant). Robustness between grid points: the stored Q's
+Refused: an FB model with a pole within ``UNDAMPED_MARGIN`` (1e-6) of the unit circle other
+than a real one at DC (an identification defect; see the constant). Robustness between grid points: the stored Q's
 r_95 |S_model Q| is evaluated on ``anc.feedback.dense_grid`` (every FFT bin of 16384 points,
 8192 log-spaced points from 0.1 Hz and each model pole's peak); where it exceeds ``DENSE_MARGIN``
 (0.99) times the bound 0.5, Q is scaled down to it. The margin on that grid is
@@ -58,7 +58,7 @@ __all__ = ["DesignOptions", "design", "predict", "TRUNCATION_TOLERANCE_DB", "TRU
 TRUNCATION_TOLERANCE_DB = 0.1
 TRUNCATION_BANDS_HZ = (50.0, 1000.0)
 # An FB model pole closer than this to the unit circle (a mode decaying by 1/e in over 1e6 samples,
-# 20 s at 48 kHz) is refused: no acoustic path rings that long (the seed's FB path's slowest pole is
+# 20 s at 48 kHz), other than a real pole at DC (Q's double zero), is refused: no acoustic path rings that long (the seed's FB path's slowest pole is
 # 1 - 1e-4), and the runtime runs the internal model as given, so the loop d_hat = d + (S - S_model) y
 # carries the model's resonance (random helmet 9: a pair at 22000.918 Hz with radius 1 - 1e-9 gives
 # |S_model| = 2.5e8 there against |S| = 0.0075; |Delta Q| = 3.4e4 within 1e-3 Hz of it, between the
@@ -90,11 +90,15 @@ class DesignOptions:
 
 
 def undamped_pole(model: Model) -> tuple[float, float] | None:
-    """(radius, frequency in Hz) of the model's pole nearest the unit circle if it lies within
-    ``UNDAMPED_MARGIN`` of it, else None."""
+    """(radius, frequency in Hz) of the model's pole nearest the unit circle, leaving out real poles
+    near z = 1, if it lies within ``UNDAMPED_MARGIN`` of it, else None. A pole at DC stays out of
+    the loop: Q has a double zero there (``anc.basis``), so |Delta Q| = 0 at DC whatever the model."""
     if not model.order:
         return None
     poles = np.linalg.eigvals(model.A)
+    poles = poles[~((np.abs(poles.imag) < 1e-12) & (poles.real > 0.0))]
+    if not poles.size:
+        return None
     nearest = int(np.argmax(np.abs(poles)))
     radius = float(np.abs(poles[nearest]))
     if 1.0 - radius >= UNDAMPED_MARGIN:
