@@ -14,8 +14,9 @@ little gain stops on a plateau of them. Here every order n = 1..n_max is tried
   model's residual relative to the input is largest.
 
 Every start is screened by the output-error cost with its poles held fixed (one linear
-least-squares solve), the best few are refined (``output_error``) and ranked by the
-validation rms on the sweeps; the best refined model of each order is kept.
+least-squares solve), the best few are refined (``output_error``, stopped once an iteration
+gains less than the noise can tell: ``noise_tolerance``) and ranked by the validation rms on
+the sweeps; the best refined model of each order is kept.
 
 A scan that ends above 1.2x the floor has usually missed a lightly damped mode that no
 start above holds (``_insert_modes``): a pair is then added to the picked model at the
@@ -33,7 +34,7 @@ from . import lti
 from .output_error import BlockData, linear_cost, refine_output_error, residual_spectrum
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
 from .thresholds import AT_FLOOR
-from .validation import SweepSpectrum, rms_from_responses
+from .validation import SweepSpectrum, band_energy, rms_from_responses
 
 __all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
 
@@ -53,6 +54,9 @@ _INSERT_FREQUENCIES = 40
 _INSERT_Q = (3.0, 20.0)
 _INSERT_REFINED = 3
 _INSERT_ROUNDS = 3
+# A block residual within this many standard deviations of the noise energy the floor predicts
+# is at the block's noise level (``block_at_noise``).
+_NOISE_SIGMAS = 3.0
 
 
 @dataclass
@@ -76,6 +80,25 @@ def sweep_rms(A, B, C, D, sweeps: list[SweepSpectrum]) -> float:
     """Validation rms of the core (A, B, C, D) on the (delay-compensated) sweep spectra."""
     responses = [lti.frequency_response(A, B, C, D, np.exp(2j * np.pi * s.frequencies / s.fs)) for s in sweeps]
     return rms_from_responses(sweeps, responses)
+
+
+def block_at_noise(A, block: BlockData, sweeps: list[SweepSpectrum], floor: float, feedthrough: bool) -> bool:
+    """Whether the output-error residual of the poles eig(A) on ``block`` is at the block's noise level.
+
+    Inside the sweeps' band the residual's mean square over the block (Parseval, ``band_energy``
+    / L) is compared with floor^2, the output noise's mean square in that band measured from the
+    two sweeps: no model can lower it further. The estimate of a sum of N complex bins of noise
+    has a relative standard deviation of 1/sqrt(N) (chi-square with 2N degrees of freedom, 1.6 %
+    for a 1 s block at 4 kHz); within _NOISE_SIGMAS of it, a better model cannot be told apart on
+    this block, whatever the sweeps' rms says (they weigh the bass more than the noise block does).
+    """
+    residual = residual_spectrum(A, block, feedthrough=feedthrough)
+    frequency = np.abs(np.angle(block.z)) * block.fs / (2 * np.pi)
+    inside = (frequency >= sweeps[0].frequencies[0]) & (frequency <= sweeps[0].frequencies[-1])
+    if not np.any(inside):
+        return False
+    mean_square = band_energy(residual[inside], block.length) / block.length
+    return bool(mean_square <= (1 + _NOISE_SIGMAS / np.sqrt(np.count_nonzero(inside))) * floor**2)
 
 
 def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np.ndarray:
@@ -126,7 +149,7 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
         screened.sort(key=lambda item: item[0])
         for _, frequency, q, A in screened[:_INSERT_REFINED]:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
-                                      feedthrough=feedthrough, max_iterations=max_iterations)
+                                      feedthrough=feedthrough, max_iterations=max_iterations, noise_tolerance=True)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
             if n not in best or rms < best[n].rms:
                 best[n] = OrderCandidate(n, f"order {base.order} + mode at {frequency:.0f} Hz Q {q:g}", rms,
@@ -148,7 +171,8 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
     times the noise floor ``floor`` (FS), when ``patience`` successive orders have not
     lowered the best rms by 1 % (a plateau of several orders, not the first stall), or
     when ``near_patience`` orders have not lowered it once it is within ``near_floor``
-    times the floor.
+    times the floor or its residual on the block is at the block's noise level
+    (``block_at_noise``).
     """
     orders = sorted(int(n) for n in orders)
     raw = data_subspace_poles(block.z, block.U, block.Y, orders, q=max(orders) + 10)
@@ -182,7 +206,7 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
         chosen = [item for item in screened[:_REFINED_STARTS] if item[0] <= _SCREEN_RATIO * screened[0][0]]
         for _, label, A, moved in chosen:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
-                                      feedthrough=feedthrough, max_iterations=max_iterations)
+                                      feedthrough=feedthrough, max_iterations=max_iterations, noise_tolerance=True)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
             if n not in best or rms < best[n].rms:
                 best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved)
@@ -194,8 +218,11 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
         else:
             since += 1
         # Near the floor a plateau is the floor seen through the scan block's variance, not a
-        # local minimum: two orders without gain end it there.
-        near = record <= near_floor * floor and since >= near_patience
+        # local minimum: two orders without gain end it there. So does a plateau whose best model's
+        # residual on the block is already at the block's noise level (the sweeps may still read it
+        # above the floor: the bass the sweeps weigh heavily holds few bins of a short block).
+        near = since >= near_patience and (record <= near_floor * floor or block_at_noise(
+            min(best.values(), key=lambda c: c.rms).A, block, sweeps, floor, feedthrough))
         if best[n].rms <= at_floor * floor or since >= patience or near:
             if progress and k + 1 < len(orders):
                 progress(len(orders), len(orders), "order search")

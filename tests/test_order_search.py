@@ -14,7 +14,7 @@ import scipy.signal
 
 from sysid import lti
 from sysid.model import MAX_COEFFICIENT, Model
-from sysid.order_search import OrderCandidate, _insert_modes, _pair, sweep_rms
+from sysid.order_search import OrderCandidate, _insert_modes, _pair, block_at_noise, sweep_rms
 from sysid.output_error import block_data, refine_output_error
 from sysid.recordings import Recording
 from sysid.validation import sweep_spectrum
@@ -116,3 +116,18 @@ def test_a_search_near_the_floor_gets_nothing_inserted():
     _insert_modes(best, block, sweeps, stalled.rms, max_order=30, feedthrough=False, max_iterations=20,
                   min_gain=0.03)
     assert list(best) == [2] and best[2] is stalled
+
+
+def test_the_true_plants_residual_is_at_the_blocks_noise_level():
+    block, sweeps, floor, _ = _insertion_case()
+    A, _, _, _ = _two_mode_plant()
+    assert block_at_noise(A, block, sweeps, floor, feedthrough=False)
+    # The same residual against a floor said to be 10 % lower is above it (3 sigma is 5 % here).
+    assert not block_at_noise(A, block, sweeps, 0.9 * floor, feedthrough=False)
+
+
+def test_a_model_missing_a_bass_mode_is_not_at_the_blocks_noise_level():
+    # The stalled model lacks the 35 Hz mode: its residual on the 1 s block stays above the
+    # noise, so the search's patience for plateaus far above the floor still applies to it.
+    block, sweeps, floor, stalled = _insertion_case()
+    assert not block_at_noise(stalled.A, block, sweeps, floor, feedthrough=False)

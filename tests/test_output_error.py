@@ -45,3 +45,20 @@ def test_unstable_start_is_rejected(rng):
     data = block_data(_noise_recording(appendix_a_model("ff"), rng, seconds=0.5), max_seconds=None)
     with pytest.raises(IdentificationError, match="needs a stable starting model"):
         refine_output_error(np.array([[1.1]]), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1)), data)
+
+
+def test_noise_tolerance_stops_early_at_the_same_cost_within_one_noise_variance(rng):
+    # Started 0.3 % off the poles of the appendix-A FF plant with output noise: the default
+    # tolerance iterates on for gains far below sigma^2 = V / N; the noise tolerance stops
+    # sooner, and what it leaves is less than one sigma^2 (1/N of the cost) above.
+    plant = appendix_a_model("ff")
+    data = block_data(_noise_recording(plant, rng, seconds=2.0, output_noise=1e-3), max_seconds=None)
+    poles = np.linalg.eigvals(plant.A)
+    start = lti.real_block_diagonal(poles * (1 - 0.003) * np.exp(0.01j * np.sign(poles.imag)))
+    args = (start, np.ones((5, 1)), np.ones((1, 5)), np.zeros((1, 1)), data)
+    full = refine_output_error(*args)
+    quick = refine_output_error(*args, noise_tolerance=True)
+    residuals = 2 * data.z.size
+    assert quick.iterations < full.iterations
+    assert quick.cost_after <= full.cost_after * (1 + 1.0 / residuals)
+    assert quick.cost_after < 0.5 * quick.cost_before
