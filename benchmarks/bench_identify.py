@@ -96,8 +96,9 @@ def bench_path(path: str, repeats: int, folder: Path) -> dict:
             "candidates": grid.rms.size, "stable": int(np.isfinite(grid.rms).sum())}
 
 
-def bench_random(seed: int, noise_seconds: float, sweep_seconds: float) -> dict:
-    """Seed grid alone and full pipeline on the random helmet ``seed``: rms / true floor, FRF error, order, delay, time."""
+def bench_random(seed: int, noise_seconds: float, sweep_seconds: float, full_only: bool = False) -> dict:
+    """Seed grid alone and full pipeline on the random helmet ``seed``: rms / true floor, FRF error, order, delay, time
+    (wall and CPU seconds, ``time.process_time``); ``full_only`` skips the grid alone."""
     rp = random_plant(seed)
     # Short sessions (the tests' 8 s / 2 s) keep the tests' 0.2 s of silence after each sweep.
     extra = {"sweep_silence": 0.2} if sweep_seconds < 5 else {}
@@ -106,7 +107,8 @@ def bench_random(seed: int, noise_seconds: float, sweep_seconds: float) -> dict:
     f = np.geomspace(20.0, 4000.0, 2000)
     h_true = rp.model.frequency_response(f)
     out = {"seed": seed, "order": rp.order, "delay": rp.delay}
-    for label, options in (("grid", IdentificationOptions(refine=False, latency=False)), ("full", IdentificationOptions())):
+    methods = (("grid", IdentificationOptions(refine=False, latency=False)), ("full", IdentificationOptions()))
+    for label, options in methods[1:] if full_only else methods:
         t0, c0 = time.perf_counter(), time.process_time()
         result = identify(session.noise, session.sweeps, "fb", options)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -125,23 +127,24 @@ def _why(r: dict, label: str) -> str:
     return ", ".join(x for x in reasons if x)
 
 
-def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: int = 0) -> None:
+def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: int = 0, full_only: bool = False) -> None:
+    labels = (("full", "full pipeline"),) if full_only else (("grid", "seed grid alone"), ("full", "full pipeline"))
     rows = []
     for seed in range(first, first + count):
-        rows.append(bench_random(seed, noise_seconds, sweep_seconds))
+        rows.append(bench_random(seed, noise_seconds, sweep_seconds, full_only))
         r = rows[-1]
         print(f"<!-- seed {seed}: true n {r['order']} d {r['delay']}; " + "; ".join(
-            f"{k} rms {r[k]['rms']:.2f}x frf {r[k]['frf']:.3f} n {r[k]['order']} d {r[k]['delay']} {r[k]['wall']:.1f} s"
-            for k in ("grid", "full")) + " -->", flush=True)
+            f"{k} rms {r[k]['rms']:.2f}x frf {r[k]['frf']:.3f} n {r[k]['order']} d {r[k]['delay']} {r[k]['wall']:.1f} s "
+            f"CPU {r[k]['cpu']:.1f} s" for k, _ in labels) + " -->", flush=True)
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\nMachine: {_cpu_model()}, {__import__('os').cpu_count()} cores, date {time.strftime('%Y-%m-%d')}. "
           f"Command: `python benchmarks/bench_identify.py --random {count} --first {first} --noise-seconds "
-          f"{noise_seconds:g} --sweep-seconds {sweep_seconds:g}`. Peak resident memory of the process: {peak_mib:.0f} MiB.\n")
+          f"{noise_seconds:g} --sweep-seconds {sweep_seconds:g}{' --full-only' if full_only else ''}`. Peak resident memory of the process: {peak_mib:.0f} MiB.\n")
     print("| method | at floor (rms <= 1.2x, FRF <= 5 %) | and delay within 2 | median / worst rms/floor | "
           "median / worst FRF error | order chosen - true (median, range) | delay error (range) | "
           "wall median / worst (s) | CPU median / worst (s) |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for label, name in (("grid", "seed grid alone"), ("full", "full pipeline")):
+    for label, name in labels:
         rms = np.array([r[label]["rms"] for r in rows])
         frf = np.array([r[label]["frf"] for r in rows])
         dn = np.array([r[label]["order"] - r["order"] for r in rows])
@@ -167,9 +170,10 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=0, help="first random helmet seed")
     parser.add_argument("--noise-seconds", type=float, default=23.0)
     parser.add_argument("--sweep-seconds", type=float, default=9.0)
+    parser.add_argument("--full-only", action="store_true", help="with --random: the full pipeline only, not the grid alone")
     args = parser.parse_args()
     if args.random:
-        main_random(args.random, args.noise_seconds, args.sweep_seconds, args.first)
+        main_random(args.random, args.noise_seconds, args.sweep_seconds, args.first, args.full_only)
         return
     with tempfile.TemporaryDirectory() as tmp:
         results = {path: bench_path(path, args.repeats, Path(tmp)) for path in ("fb", "ff")}
