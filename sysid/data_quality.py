@@ -16,6 +16,16 @@ Used by the loader's warnings (``sysid.recordings``), by the diagnosis findings
   spike in the histogram many times the next bin; an unclipped sine (arcsine
   density) gives a ratio of sqrt(2) + 1 = 2.4, noise much less. Samples at the
   converter's rails count as clipped whatever the histogram.
+- Clipping against a prediction (``clipped_against_prediction``): sensor noise added
+  after the clipper scatters a flat top over several noise widths, and the histogram
+  spike falls below ``SPIKE_RATIO`` (a preamplifier at 0.12 FS with noise of 0.7 % of
+  its clip level: 2.3x). A model's prediction tells what the signal should have been:
+  where the prediction goes beyond the measured extreme by more than half the noise
+  band (and by more than its scatter elsewhere), a clipped channel stays flat, within
+  noise of its clip level, while the prediction moves (the measured signal against the
+  predicted one has a slope near 0 there); a channel that only differs from the model
+  (a missing nonlinearity, gain or delay, an offset) follows the prediction with a slope
+  near 1, and a good model never goes that far beyond the measured extreme.
 """
 
 from __future__ import annotations
@@ -24,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["dc_offset", "clipped_samples", "clipped_stretches", "Clipping", "DC_RELATIVE", "DC_ABSOLUTE",
-           "CLIP_MIN_SAMPLES", "RAILS_16BIT"]
+__all__ = ["dc_offset", "clipped_samples", "clipped_against_prediction", "clipped_stretches", "Clipping",
+           "DC_RELATIVE", "DC_ABSOLUTE", "CLIP_MIN_SAMPLES", "RAILS_16BIT"]
 
 DC_RELATIVE = 0.02
 DC_ABSOLUTE = 1e-4
@@ -39,6 +49,12 @@ SPIKE_RATIO = 6.0
 # The top bin is at least NOISE_WIDTHS times the channel's noise RMS wide, at most MAX_WIDTH of the level.
 NOISE_WIDTHS = 8.0
 MAX_WIDTH = 0.2
+# Clipping against a prediction: at least FLAT_MIN_SAMPLES samples predicted beyond the measured extreme,
+# where the measured signal rises by at most FLAT_SLOPE per unit of prediction.
+FLAT_MIN_SAMPLES = 10
+FLAT_SLOPE = 0.25
+# ... and predicted beyond it by at least RESIDUAL_WIDTHS times the prediction's robust RMS misfit.
+RESIDUAL_WIDTHS = 5.0
 
 
 def _noise_rms(x: np.ndarray) -> float:
@@ -72,8 +88,13 @@ class Clipping:
         return float(np.count_nonzero(self.mask) / self.mask.size) if self.mask.size else 0.0
 
 
-def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT) -> Clipping:
-    """The samples of x that sit at a clip level (any level, either polarity); see the module docstring."""
+def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT, predicted: np.ndarray | None = None
+                    ) -> Clipping:
+    """The samples of x that sit at a clip level (any level, either polarity); see the module docstring.
+
+    With ``predicted`` (a model's prediction of x), also the flat tops the noise after the clipper
+    hides from the histogram (``clipped_against_prediction``), at a polarity the histogram misses.
+    """
     x = np.asarray(x, float)
     mask = (x <= rails[0]) | (x >= rails[1])
     levels = []
@@ -96,7 +117,60 @@ def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT) -> 
         if n_top >= CLIP_MIN_SAMPLES and n_top > SPIKE_RATIO * max(n_next, 1):
             mask |= in_top
             levels.append(sign * top)
+    if predicted is not None:
+        against = clipped_against_prediction(x, predicted)
+        for level in against.levels:
+            if not any(np.sign(v) == np.sign(level) for v in levels):
+                mask[: against.mask.size] |= against.mask & (np.sign(level) * x[: against.mask.size] > 0)
+                levels.append(level)
     return Clipping(mask, tuple(sorted(set(levels))))
+
+
+def clipped_against_prediction(x: np.ndarray, predicted: np.ndarray) -> Clipping:
+    """The samples of x (measured, FS) that sit flat at a clip level where ``predicted`` (a model's
+    prediction of x, FS) goes beyond it; see the module docstring.
+
+    Per polarity: the band W is the histogram test's top bin (``NOISE_WIDTHS`` noise RMS, at least
+    ``TOP_WIDTH`` of the extreme); the samples predicted beyond the measured extreme by more than
+    W/2 and ``RESIDUAL_WIDTHS`` times the robust RMS of predicted minus measured (away from the
+    extremes: noise on the input passes through the model into the prediction, which then strays
+    beyond the measured extreme by chance, its excess uncorrelated with the measurement) are the
+    candidates. Clipping when there are at least ``FLAT_MIN_SAMPLES``, the prediction
+    spreads over them by at least W/4 while the measured signal spreads by at most W/2, and the
+    least-squares slope of measured on predicted there is at most ``FLAT_SLOPE``. The clip level is
+    the measured median over the candidates; every sample within W/2 of it (or beyond) is clipped.
+    """
+    x, predicted = np.asarray(x, float), np.asarray(predicted, float)
+    n = min(x.size, predicted.size)
+    x, predicted = x[:n], predicted[:n]
+    mask = np.zeros(x.size, bool)
+    levels = []
+    noise = _noise_rms(x)
+    # The prediction's own scatter about the measurement where neither is near a clip level (robust
+    # RMS): input noise passes through the model into the prediction, not into the measurement.
+    quiet = np.abs(predicted) < 0.5 * np.max(np.abs(x), initial=0.0)
+    residual = (predicted - x)[quiet] if np.count_nonzero(quiet) >= 100 else predicted - x
+    misfit = 1.4826 * float(np.median(np.abs(residual - np.median(residual)))) if residual.size else 0.0
+    for sign in (1.0, -1.0):
+        s, p = sign * x, sign * predicted
+        top = float(s.max()) if s.size else 0.0
+        if top <= 0.0:
+            continue
+        width = min(max(TOP_WIDTH * top, NOISE_WIDTHS * noise), MAX_WIDTH * top)
+        beyond = p > top + max(width / 2, RESIDUAL_WIDTHS * misfit)
+        if np.count_nonzero(beyond) < FLAT_MIN_SAMPLES:
+            continue
+        measured, moved = s[beyond], p[beyond]
+        spread = float(np.std(moved))
+        if spread < width / 4 or float(np.std(measured)) > width / 2:
+            continue
+        slope = float(np.mean((measured - measured.mean()) * (moved - moved.mean()))) / spread**2
+        if slope > FLAT_SLOPE:
+            continue
+        level = float(np.median(measured))
+        mask |= s >= level - width / 2
+        levels.append(sign * level)
+    return Clipping(mask, tuple(sorted(levels)))
 
 
 def clipped_stretches(mask: np.ndarray, fs: float, margin_s: float) -> list[list[float]]:

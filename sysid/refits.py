@@ -419,11 +419,13 @@ def add_clock_drift(model, noise, sweeps, params, options, transient_s):
 
 def with_clipping(model, noise, sweeps, params):
     """The model with the clipped stretches of every recording (either channel, any level, with margins;
-    found on the ear signal as the model's clock ratio corrects it) in its ``excluded``, core kept."""
+    found on the ear signal as the model's clock ratio corrects it, the flat tops also against the
+    model's prediction) in its ``excluded``, core kept."""
     excluded = dict(model.excluded)
     fractions = []
     for recording in (noise, *sweeps):
-        spans, _ = clipped_stretches_of(corrected(recording, model.clock_ratio))
+        resampled = corrected(recording, model.clock_ratio)
+        spans, _ = clipped_stretches_of(resampled, model.simulate(resampled.u))
         if spans:
             excluded[recording_key(recording)] = spans
         fractions.append(sum(b - a for a, b in spans) / recording.duration)

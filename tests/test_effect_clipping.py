@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
+import scipy.signal
 
 from sysid.compare import compare
-from sysid.data_quality import clipped_samples, clipped_stretches
+from sysid.data_quality import clipped_against_prediction, clipped_samples, clipped_stretches
 from sysid.diagnose import diagnose, format_findings
 from sysid.refine import format_refinement, refine, refine_auto
 
@@ -44,6 +45,44 @@ class TestClippedSamples:
         assert clipped_stretches(mask, 1000.0, 0.01) == [[0.09, 0.13]]
 
 
+def sweep_through(level, peak, seed, shape=lambda v: v):
+    """(clean ear signal, its measured version): a tone whose amplitude rises to peak times the clip
+    level through a low-pass path, clipped at level and with sensor noise of 0.7 % of the level added
+    after the clipper (a preamplifier that flat-tops below full scale); ``shape`` bends the input."""
+    t = np.arange(44100) / FS
+    u = np.linspace(0.0, 1.0, t.size) * np.sin(2 * np.pi * 200 * t)
+    path = [0.2], [1.0, -0.8]
+    clean = scipy.signal.lfilter(*path, shape(u)) * peak * level / np.max(np.abs(scipy.signal.lfilter(*path, u)))
+    noisy = np.clip(clean, -level, level) + 0.007 * level * np.random.default_rng(seed).standard_normal(t.size)
+    return clean, np.round(noisy * 32768) / 32768
+
+
+class TestClippedAgainstPrediction:
+    def test_flat_tops_under_noise_that_the_histogram_misses_are_found(self):
+        clean, x = sweep_through(0.12, 1.4, 4)
+        assert clipped_samples(x).fraction == 0.0
+        found = clipped_samples(x, predicted=clean)
+        truth = np.abs(clean) >= 0.12
+        assert found.fraction == pytest.approx(np.mean(truth), rel=0.25)
+        assert np.all(found.mask[truth])
+        assert len(found.levels) == 2 and all(abs(abs(v) - 0.12) < 0.002 for v in found.levels)
+
+    def test_a_good_prediction_of_an_unclipped_signal_finds_nothing(self):
+        clean, _ = sweep_through(0.12, 1.0, 5)
+        x = clean + 0.007 * 0.12 * np.random.default_rng(5).standard_normal(clean.size)
+        assert clipped_against_prediction(x, 1.01 * clean).fraction == 0.0
+
+    @pytest.mark.parametrize("a2, a3", [(0.03, 0.0), (0.0, -0.05), (0.03, 0.1)])
+    def test_an_input_nonlinearity_is_not_clipping(self, a2, a3):
+        # The measured signal follows the input polynomial; the linear prediction is off at the peaks
+        # by a few per cent, but the measured signal moves with it, it does not stay flat.
+        measured, _ = sweep_through(0.5, 1.0, 6, shape=lambda v: v + a2 * v**2 + a3 * v**3)
+        linear, _ = sweep_through(0.5, 1.0, 6)
+        x = measured + 2e-4 * np.random.default_rng(6).standard_normal(measured.size)
+        assert clipped_against_prediction(x, linear).fraction == 0.0
+        assert clipped_samples(x, predicted=linear).fraction == 0.0
+
+
 @pytest.mark.parametrize("path, effect", [("ff", "clipping:1.3"), ("ff", "clipping:1.5,0.3")])
 def test_clipping_is_found_and_excluded_until_the_floor(path, effect):
     session, model = effect_case(path, 5, (effect,))
@@ -64,3 +103,23 @@ def test_refine_add_clipping_reports_the_excluded_fraction():
     assert len(fractions) == 3 and all(0.0 <= f < 0.5 for f in fractions) and max(fractions) > 0.0
     assert result.after.excluded_fraction > 0.0
     assert result.after.rms < result.before.rms
+
+
+@pytest.mark.slow
+def test_a_preamplifier_clipping_below_full_scale_under_sensor_noise_is_found_in_the_users_workflow():
+    # A random helmet whose ear preamplifier flat-tops at 0.12 FS, its sensor noise (0.7 % of the clip
+    # level) after the clipper: the histogram sees 2.3x, not 6x; the model identified on the session
+    # itself predicts beyond the flat tops, and the clipping is found, excluded, and the error falls.
+    from sysid.identify import IdentificationOptions, identify
+    from sysid.random_plant import random_session
+    session = random_session(200, "ff", effects=["clipping:1.40,0.12"], noise_duration=8.0, sweep_duration=2.0,
+                             sweep_silence=0.2)
+    assert all(clipped_samples(s.y).fraction == 0.0 for s in session.sweeps)
+    model = identify(session.noise, session.sweeps, "ff",
+                     IdentificationOptions(gammas=tuple(range(10, 1001, 60)), refine_seconds=3.0)).model
+    findings = diagnose(model, session.noise, session.sweeps)
+    top = findings.significant[0]
+    assert top["effect"] == "clipping", format_findings(findings)
+    assert all(abs(abs(v) - 0.12) < 0.005 for v in top["params"]["levels_fs"]), format_findings(findings)
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    assert auto.steps[0].effect == "clipping" and auto.after.ratio <= 1.2, format_refinement(auto.steps, auto.stop_reason)

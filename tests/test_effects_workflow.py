@@ -17,7 +17,7 @@ from sysid.identify import IdentificationOptions, identify
 from sysid.random_plant import random_session
 from sysid.refine import format_refinement, refine_auto
 from sysid.simulate import SIMULATED_EFFECTS, random_effect, simulate_session
-from sysid.thresholds import AT_FLOOR
+from sysid.thresholds import AT_FLOOR, UNDER_MODELLED_EXCESS
 
 from conftest import SHORT, short_spec
 from effect_sessions import TEST_REFIT
@@ -104,14 +104,27 @@ def test_every_effect_on_random_helmets(kinds, path, seed):
     check_workflow(session, path, kinds, drawn)
 
 
+def clean_verdict(seed: int, path: str) -> tuple[float, list[str]]:
+    """(rms / floor of the model identified on a clean short random-helmet session, its significant findings)."""
+    session = random_session(seed, path, **SHORT)
+    model = identify(session.noise, session.sweeps, path, OPTIONS).model
+    findings = diagnose(model, session.noise, session.sweeps)
+    return findings.comparison.ratio, [f["effect"] for f in findings.significant]
+
+
 @pytest.mark.slow
 def test_clean_random_helmets_raise_at_most_two_percent_false_alarms():
-    alarms = []
+    # 100 clean sessions, self-identified. Where identification ends above UNDER_MODELLED_EXCESS times
+    # the floor, under-modelled is the required answer (not a false alarm; identify's shortfall) and
+    # must be there; any other significant finding on a clean session is a false alarm.
+    alarms, short = [], []
     for seed in range(50):
         for path in ("fb", "ff"):
-            session = random_session(500 + seed, path, **SHORT)
-            model = identify(session.noise, session.sweeps, path, OPTIONS).model
-            significant = diagnose(model, session.noise, session.sweeps).significant
-            if significant:
-                alarms.append((seed, path, [f["effect"] for f in significant]))
-    assert len(alarms) <= 2, alarms
+            ratio, significant = clean_verdict(500 + seed, path)
+            if ratio > UNDER_MODELLED_EXCESS:
+                assert "under-modelled" in significant, (seed, path, ratio, significant)
+                short.append((seed, path, ratio))
+            false = [e for e in significant if not (e == "under-modelled" and ratio > UNDER_MODELLED_EXCESS)]
+            if false:
+                alarms.append((seed, path, ratio, false))
+    assert len(alarms) <= 2, (alarms, short)

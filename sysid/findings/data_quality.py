@@ -75,11 +75,12 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
                    explanation, remedy, {"means_fs": [round(c[2], 8) for c in channels]})
 
 
-def clipped_stretches_of(recording: Recording) -> tuple[list[list[float]], float]:
-    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction."""
+def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = None) -> tuple[list[list[float]], float]:
+    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction;
+    ``predicted``: a model's prediction of the ear signal (finds flat tops that noise hides from the histogram)."""
     spans, fraction = [], 0.0
-    for x, margin in ((recording.u, INPUT_MARGIN_S), (recording.y, EAR_MARGIN_S)):
-        clipping = clipped_samples(x)
+    for x, margin, guess in ((recording.u, INPUT_MARGIN_S, None), (recording.y, EAR_MARGIN_S, predicted)):
+        clipping = clipped_samples(x, predicted=guess)
         fraction = max(fraction, clipping.fraction)
         spans += clipped_stretches(clipping.mask, recording.fs, margin)
     mask = np.zeros(recording.u.size, bool)
@@ -89,17 +90,20 @@ def clipped_stretches_of(recording: Recording) -> tuple[list[list[float]], float
 
 
 def clipping_finding(ctx: DiagnosisContext) -> dict:
-    """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``)."""
+    """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``;
+    on the ear channel also against the model's prediction, where noise after the clipper hides the
+    flat tops from the histogram)."""
     worst, where, levels = 0.0, "", []
     fractions, excluded = {}, {}
-    for recording in _recordings(ctx):
-        for label, x in (("input", recording.u), ("ear", recording.y)):
-            clipping = clipped_samples(x)
+    predictions = [ctx.model.simulate(ctx.noise.u)] + [record["predicted"] for record in ctx.comparison.per_sweep]
+    for recording, predicted in zip(_recordings(ctx), predictions):
+        for label, x, guess in (("input", recording.u, None), ("ear", recording.y, predicted)):
+            clipping = clipped_samples(x, predicted=guess)
             fractions[f"{recording.path}:{label}"] = clipping.fraction
             if clipping.fraction > worst:
                 worst, where, levels = clipping.fraction, f"{label} channel of {recording.path}", clipping.levels
         # The stretches come from the same masks: a recording without a clipped sample has none.
-        spans = clipped_stretches_of(recording)[0] if any(
+        spans = clipped_stretches_of(recording, predicted)[0] if any(
             fractions[f"{recording.path}:{label}"] > 0 for label in ("input", "ear")) else []
         if spans:
             excluded[recording_key(recording)] = spans
