@@ -104,9 +104,10 @@ def _check_random(seed):
 
 # Helmets whose design is stable and achieves what it predicts but falls more than 1 dB short of the
 # like-for-like design on the true plants, and why (BENCHMARKS.md, Control). None at present: 5 and 7
-# came within 1 dB (7: the FF band rule and the FF model's gain capped outside its band; 5: the limit
-# made with the identified model's band), and 1 and 9 are refused (their identified FB models have
-# poles at radius 1 - 1e-9: undamped modes, ``anc.design.UNDAMPED_MARGIN``).
+# come within 1 dB (7: the FF band rule and the FF model's gain capped outside its band; 5: the limit
+# made with the identified model's band). A helmet whose identified FB model has an undamped pole
+# (radius 1 - 1e-9, ``anc.design.UNDAMPED_MARGIN``; 9 and 1 with identify as of 9675620, 2 as of
+# 435c1fd) is checked to be refused instead.
 SHORT_OF_TRUTH: dict[int, str] = {}
 
 
