@@ -36,7 +36,9 @@
  *     sits at a 16-bit rail and falls by 1 (down to 0) in every other frame reaches
  *     8 * ANC_LIMIT_RAIL_SAMPLES. Drive or d_hat held at a rail mute after exactly
  *     ANC_LIMIT_RAIL_SAMPLES frames; an oscillation that touches a rail in a fraction p of
- *     its frames (p > 1/9) mutes within 8 * ANC_LIMIT_RAIL_SAMPLES / (9 p - 1) frames;
+ *     its frames (p > 1/9) mutes within (8 * ANC_LIMIT_RAIL_SAMPLES + 7) / (9 p - 1) frames,
+ *     counted from its first frame at a rail to the trip frame inclusive (the score is at
+ *     least (9 p - 1) times that count and at most 8 * ANC_LIMIT_RAIL_SAMPLES + 7 at the trip);
  *     occasional clipping of loud noise (p < 1/9) never mutes; or
  *   - growth: sum |d_hat| over a window of ANC_LIMIT_WINDOW frames exceeds twice that of
  *     the window before (6 dB growth) and ANC_LIMIT_FLOOR LSB per frame on average, for

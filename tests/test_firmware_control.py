@@ -186,9 +186,11 @@ def test_limiter_mutes_destabilised_loop(setup):
     assert rails.size, "the destabilised loop should reach the rails without the limiter"
     assert twin.trips == 1 and twin.muted in (1, 2)
     if twin.muted == 1:
-        # The stated bound for rails touched in a fraction p of the frames (anc_control.h).
+        # The stated bound for rails touched in a fraction p of the frames (anc_control.h), the
+        # frames counted from the first at a rail to the trip frame inclusive.
+        frames = twin.muted_at - rails[0] + 1
         p = np.mean(np.isin(np.arange(rails[0], twin.muted_at + 1), rails))
-        assert p > 1 / 9 and twin.muted_at - rails[0] <= 8 * limits.rail_samples / (9 * p - 1)
+        assert p > 1 / 9 and frames <= (8 * limits.rail_samples + 7) / (9 * p - 1)
     # The drive computed at the trip frame is already zero; it is played 2 frames later (B = 1).
     np.testing.assert_array_equal(twin.drive[: twin.muted_at + 2], unlimited.drive[: twin.muted_at + 2])
     assert np.all(twin.drive[twin.muted_at + 2:] == 0)
@@ -197,7 +199,7 @@ def test_limiter_mutes_destabilised_loop(setup):
 def test_limiter_rail_bound(setup):
     """A huge ear signal from frame 500 on puts d_hat at the rail in a fraction p of the frames (the
     drive's echo through S_model pulls it off now and then): the mute comes within the stated
-    8 ANC_LIMIT_RAIL_SAMPLES / (9 p - 1) frames, and exactly ANC_LIMIT_RAIL_SAMPLES when p = 1."""
+    (8 ANC_LIMIT_RAIL_SAMPLES + 7) / (9 p - 1) frames, and exactly ANC_LIMIT_RAIL_SAMPLES when p = 1."""
     plan = setup["plan"]
     silent = Model(path="fb", fs=plan.controller.fs, A=np.zeros((0, 0)), B=np.zeros((0, 1)), C=np.zeros((1, 0)),
                    D=np.zeros((1, 1)))
@@ -209,7 +211,7 @@ def test_limiter_rail_bound(setup):
     assert twin.muted == 1 and np.max(np.abs(twin.drive.astype(int))) < 32767
     window = np.abs(twin.d_hat[500: twin.muted_at + 1].astype(int)) >= 32767
     p = np.mean(window)
-    assert n - 1 <= twin.muted_at - 500 <= 8 * n / (9 * p - 1)
+    assert n <= twin.muted_at - 500 + 1 <= (8 * n + 7) / (9 * p - 1)
     if p == 1.0:
         assert twin.muted_at == 500 + n - 1
 
