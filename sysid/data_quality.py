@@ -46,6 +46,10 @@ RAILS_16BIT = (-1.0, 32767 / 32768.0)
 # the top bin must hold to be a clipping spike rather than the peak of a sine.
 TOP_WIDTH = 0.005
 SPIKE_RATIO = 6.0
+# A spike needs this many samples in the top bin: with the next bin empty or nearly, a few samples are
+# the extremes of a few cycles of a sweep through a resonance (a clean random helmet: 7 in the top bin,
+# 1 in the next, one sample per cycle), not a flat top.
+SPIKE_MIN_SAMPLES = 10
 # The top bin is at least NOISE_WIDTHS times the channel's noise RMS wide, at most MAX_WIDTH of the level.
 NOISE_WIDTHS = 8.0
 MAX_WIDTH = 0.2
@@ -114,7 +118,7 @@ def clipped_samples(x: np.ndarray, rails: tuple[float, float] = RAILS_16BIT, pre
         in_top = s >= top - width
         n_top = int(np.count_nonzero(in_top))
         n_next = int(np.count_nonzero((s >= top - 2 * width) & ~in_top))
-        if n_top >= CLIP_MIN_SAMPLES and n_top > SPIKE_RATIO * max(n_next, 1):
+        if n_top >= SPIKE_MIN_SAMPLES and n_top > SPIKE_RATIO * max(n_next, 1):
             mask |= in_top
             levels.append(sign * top)
     if predicted is not None:
