@@ -14,9 +14,10 @@
    refined one is returned when it validates better. A pick whose simulated sweeps
    disagree with the sweeps' spectra loses its out-of-band poles run to the unit
    circle (``_settle``).
-5. The onset's delay errs short by the smoothing kernel's lead; the picked model's
-   poles say by how much (``latency.refine_delay``), and the samples its core spent
-   imitating delay move into the delay line before the final refinement.
+5. The onset's delay errs short by the smoothing kernel's lead (and long on a slowly
+   rising response); the picked model's poles say by how much (``latency.refine_delay``),
+   and the samples its core spent imitating delay move into the delay line (or back out
+   of it) before the final refinement.
 
 Every model leaves balanced (``lti.balanced_realisation``): entries of order one,
 whatever the coordinates the subspace or output-error fit produced.
@@ -291,8 +292,10 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     pick, pick_rms = _settle(pick, pick_rms, scan_block, sweep_spectra, time_rms, delay, options)
     extra = None
     if options.latency:
-        # The onset errs short by the smoothing kernel's lead; the picked core's poles say by how much.
-        extra, _ = refine_delay(pick.A, body, options.band, options.scan_seconds, feedthrough=options.feedthrough)
+        # The onset errs short by the smoothing kernel's lead, or long on a slowly rising response; the
+        # picked core's poles say by how much.
+        extra, _ = refine_delay(pick.A, body, options.band, options.scan_seconds, feedthrough=options.feedthrough,
+                                delay=delay)
         if extra:
             longer = compensate_delay(body, extra)
             longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
