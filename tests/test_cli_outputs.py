@@ -129,8 +129,11 @@ def test_generate_firmware_refuses_the_project_firmware_folder(model_file, capsy
 def _interrupt_after_progress(argv, cwd, timeout=240.0):
     """Run the CLI with stderr on a terminal; send SIGINT at its first progress draw. Return (code, stderr)."""
     master, slave = pty.openpty()
+    # A test run started in the background of a non-interactive shell inherits SIGINT ignored, and
+    # Python then installs no KeyboardInterrupt handler; a terminal's Ctrl-C finds it at its default.
     process = subprocess.Popen([sys.executable, "-m", "helmet_anc.cli", *map(str, argv)], cwd=cwd,
-                               stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL)
+                               stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     os.close(slave)
     seen, sent = b"", False
     deadline = time.monotonic() + timeout
