@@ -144,13 +144,15 @@ def _minimum_norm(q: np.ndarray, r: np.ndarray, rhs: np.ndarray, shape: tuple[in
     return np.linalg.lstsq(r, q.T @ rhs, rcond=np.finfo(float).eps * max(shape))[0]
 
 
-def _scaled_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Least-squares solution by QR (several times faster than the SVD-based lstsq), minimum-norm if rank deficient."""
+def _qr_solve(matrix: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Q, R, x): the economic QR factors of ``matrix`` and the least-squares solution x of
+    matrix x = rhs by them (several times faster than the SVD-based lstsq), minimum-norm if R is
+    rank deficient (coinciding poles)."""
     q, r = scipy.linalg.qr(matrix, mode="economic", check_finite=False)
     diagonal = np.abs(np.diag(r))
     if diagonal.size and diagonal.min() > 1e-12 * diagonal.max():
-        return scipy.linalg.solve_triangular(r, q.T @ rhs, check_finite=False)
-    return _minimum_norm(q, r, rhs, matrix.shape)
+        return q, r, scipy.linalg.solve_triangular(r, q.T @ rhs, check_finite=False)
+    return q, r, _minimum_norm(q, r, rhs, matrix.shape)
 
 
 class _Problem:
@@ -162,7 +164,10 @@ class _Problem:
         self.u_delayed = self.u_delayed * self.weight
         self.input_noise_variance = input_noise_variance
 
-    def linear(self, poles):
+    def regression(self, poles):
+        """(A, C, regressor, scales, rhs) for the poles: the modal (A, C), the [Re; Im] regressor of the
+        input and transient columns (then D) with unit-norm columns (``_stacked_real``), their
+        scales, and [Re; Im] of Y."""
         A = lti.real_block_diagonal(poles)
         C = lti.block_output_row(A)
         basis = modal_basis(A, C, self.data.z)
@@ -170,10 +175,12 @@ class _Problem:
         if self.feedthrough:
             columns.append(self.u_delayed[:, None])
         real, scale = _stacked_real(np.hstack(columns))
-        rhs = np.concatenate([self.data.Y.real, self.data.Y.imag])
-        scaled = _scaled_solve(real, rhs)
-        residual = rhs - real @ scaled
-        return A, C, scaled / scale, residual
+        return A, C, real, scale, np.concatenate([self.data.Y.real, self.data.Y.imag])
+
+    def linear(self, poles):
+        A, C, real, scale, rhs = self.regression(poles)
+        scaled = _qr_solve(real, rhs)[2]
+        return A, C, scaled / scale, rhs - real @ scaled
 
     def bias_compensated(self, poles):
         """Linear parameters by bias-compensated least squares (errors in variables).
@@ -234,21 +241,8 @@ class _Projection:
         if self._x is not None and np.array_equal(x, self._x):
             return
         poles = _params_to_poles(x, self.pairs)
-        p = self.problem
-        A = lti.real_block_diagonal(poles)
-        C = lti.block_output_row(A)
-        basis = modal_basis(A, C, p.data.z)
-        columns = [basis * p.u_delayed[:, None], basis * p.data.z[:, None]]
-        if p.feedthrough:
-            columns.append(p.u_delayed[:, None])
-        real, scale = _stacked_real(np.hstack(columns))
-        rhs = np.concatenate([p.data.Y.real, p.data.Y.imag])
-        q, r = scipy.linalg.qr(real, mode="economic", check_finite=False)
-        diagonal = np.abs(np.diag(r))
-        if diagonal.min() > 1e-12 * diagonal.max():
-            scaled = scipy.linalg.solve_triangular(r, q.T @ rhs, check_finite=False)
-        else:  # rank deficient (coinciding poles): minimum-norm solution
-            scaled = _minimum_norm(q, r, rhs, real.shape)
+        _, _, real, scale, rhs = self.problem.regression(poles)
+        q, r, scaled = _qr_solve(real, rhs)
         self._x, self._poles, self._q, self._r, self._scale, self._theta = x.copy(), poles, q, r, scale, scaled / scale
         self._residual = rhs - real @ scaled
 
