@@ -139,12 +139,7 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     # What follows (output-error blocks, the band's covariance and misfit) uses the first refine_seconds only,
     # read from a file or in memory alike: a noise recording read from its file in blocks gave its spectra above,
     # and only those seconds are held in memory.
-    head = max(options.refine_seconds, options.scan_seconds)
-    if isinstance(body, RecordingFile):
-        body = body.head(head)
-    else:
-        n = min(body.length, int(round(head * fs)))
-        body = dataclasses.replace(body, u=body.u[:n], y=body.y[:n])
+    body = body.head(max(options.refine_seconds, options.scan_seconds))
     sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
     seconds["spectra"] = time.perf_counter() - t0
 

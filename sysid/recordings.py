@@ -79,6 +79,10 @@ class Recording:
         first = int(round(start_s * self.fs))
         return Recording(self.u[first:], self.y[first:], self.fs, self.path, self.clipped_fraction, self.dc_offset)
 
+    def head(self, seconds: float | None) -> "Recording":
+        """The first ``seconds`` (all of it for None), as ``RecordingFile.head``."""
+        return _head(self, seconds)
+
 
 @dataclass(frozen=True)
 class WavLayout:
@@ -149,13 +153,17 @@ class RecordingFile:
 
     def head(self, seconds: float | None) -> Recording:
         """The first ``seconds`` (all of it for None) in memory, as a Recording."""
-        n = self.length if seconds is None else min(self.length, int(round(seconds * self.fs)))
-        u, y = self.read(0, n)
-        return Recording(u, y, self.fs, self.path, self.clipped_fraction, self.dc_offset)
+        return _head(self, seconds)
 
     def load(self) -> Recording:
         """All samples in memory (8 bytes per sample and channel), as a Recording."""
         return self.head(None)
+
+
+def _head(recording: Recording | RecordingFile, seconds: float | None) -> Recording:
+    n = recording.length if seconds is None else min(recording.length, int(round(seconds * recording.fs)))
+    u, y = recording.read(0, n)
+    return Recording(u, y, recording.fs, recording.path, recording.clipped_fraction, recording.dc_offset)
 
 
 def _blocks(recording: Recording | RecordingFile, size: int):
