@@ -19,7 +19,7 @@ from ..model import Model
 from ..recordings import Recording
 from ..thresholds import TRANSIENT_S
 
-__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "SPEED_OF_SOUND"]
+__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "SPEED_OF_SOUND"]
 
 SPEED_OF_SOUND = 343.0  # m/s in air at 20 degC
 
@@ -121,6 +121,13 @@ def finding(effect: str, significant: bool, score: float, params: dict, explanat
     return Finding(effect, bool(significant), float(score) if np.isfinite(score) else 0.0,
                    {k: _plain(v) for k, v in params.items()}, explanation, remedy,
                    {k: _plain(v) for k, v in (evidence or {}).items()})
+
+
+def noise_prediction(ctx: DiagnosisContext) -> np.ndarray:
+    """The model's prediction of the whole noise recording's ear signal (FS), computed once per context."""
+    if "noise_prediction" not in ctx.cache:
+        ctx.cache["noise_prediction"] = ctx.model.simulate(ctx.noise.u)
+    return ctx.cache["noise_prediction"]
 
 
 def linear_part(model: Model) -> Model:

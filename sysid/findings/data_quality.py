@@ -14,7 +14,7 @@ from ..corrections import recording_key
 from ..data_quality import DC_ABSOLUTE, clipped_samples, clipped_stretches, dc_offset
 from ..recordings import Recording
 from ..validation import SKIP_S
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, noise_prediction
 
 __all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of"]
 
@@ -95,7 +95,7 @@ def clipping_finding(ctx: DiagnosisContext) -> dict:
     flat tops from the histogram)."""
     worst, where, levels = 0.0, "", []
     fractions, excluded = {}, {}
-    predictions = [ctx.model.simulate(ctx.noise.u)] + [record["predicted"] for record in ctx.comparison.per_sweep]
+    predictions = [noise_prediction(ctx)] + [record["predicted"] for record in ctx.comparison.per_sweep]
     for recording, predicted in zip(_recordings(ctx), predictions):
         for label, x, guess in (("input", recording.u, None), ("ear", recording.y, predicted)):
             clipping = clipped_samples(x, predicted=guess)

@@ -17,7 +17,7 @@ import scipy.ndimage
 from ..compare import fit_sinusoids
 from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, noise_prediction
 from .dynamics import factor_residual, has_series_factor, within_resonance
 
 __all__ = ["disturbance_finding", "find_lines"]
@@ -75,7 +75,7 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     body_start = int(round(ctx.transient_s * ctx.fs))
     # What a significant series factor leaves: a lightly damped mode the model lacks rings like a line.
-    prediction = model.simulate(ctx.noise.u)
+    prediction = noise_prediction(ctx)
     residual = factor_residual(ctx, ctx.noise.y - prediction, prediction)[body_start:]
     u = ctx.noise.u[body_start:]
     candidates = [line for line in find_lines(residual, u, ctx.fs, known=model.disturbance_frequencies or ())
