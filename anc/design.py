@@ -247,7 +247,12 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         dense = dense_grid(fb_model)
         Gd = fb_model.frequency_response(dense) * np.exp(-2j * np.pi * dense * options.latency / fb_model.fs)
         r95_dense = uncertainty.at(dense)
-        full_usage = r95_dense * np.abs(Gd * full_fb.frequency_response(dense, fb_model.fs))
+
+        def dense_usage(candidate, at=slice(None)):
+            # r95 |S_model Q| of a candidate Q on the dense grid (or the part ``at`` of it).
+            return r95_dense[at] * np.abs(Gd[at] * candidate.frequency_response(dense[at], fb_model.fs))
+
+        full_usage = dense_usage(full_fb)
         dense_bound = max(DENSE_MARGIN * ROBUSTNESS_BOUND, float(np.max(full_usage)))
         # Candidates are checked where the full order comes within half of it (evaluating every
         # candidate on the whole dense grid cost seconds); the stored Q is checked everywhere below.
@@ -257,14 +262,13 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             loop = G * candidate.frequency_response(f, fb_model.fs)
             return (np.max(fb_design.relative_95 * np.abs(loop)) <= ROBUSTNESS_BOUND
                     and np.max(np.abs(1.0 + loop)) <= peak_bound
-                    and np.max(r95_dense[near] * np.abs(Gd[near] * candidate.frequency_response(dense[near], fb_model.fs)),
-                               initial=0.0) <= dense_bound)
+                    and np.max(dense_usage(candidate, near), initial=0.0) <= dense_bound)
 
         fb, truncation["fb"] = _lowest_order(fb_basis, fb_design.coefficients, fb_change, fb_admissible,
                                               options.truncate)
         # The bound between the design grid's points (``dense_grid``: FFT bins, log-spaced points and
         # each model pole's peak): Q is scaled down to DENSE_MARGIN of it if it comes closer there.
-        usage = r95_dense * np.abs(Gd * fb.frequency_response(dense, fb_model.fs))
+        usage = dense_usage(fb)
         worst = int(np.argmax(usage))
         if usage[worst] > DENSE_MARGIN * ROBUSTNESS_BOUND:
             factor = DENSE_MARGIN * ROBUSTNESS_BOUND / float(usage[worst])
