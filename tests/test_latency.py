@@ -42,17 +42,30 @@ class TestEstimateLatency:
         assert estimate.to_dict()["samples"] == estimate.samples
 
 
+BAND = (20.0, 5000.0)
+
+
+def _behind_delay(seed: int, off_by: int):
+    """(random plant ``seed``, its 2 s noise body with rp.delay + off_by samples taken out: short when
+    off_by < 0, long when > 0)."""
+    rp = random_plant(seed)
+    session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
+    return rp, compensate_delay(session.noise.trimmed(3.0), rp.delay + off_by)
+
+
+def _with_spare_poles(rp, spare) -> np.ndarray:
+    """A = the plant's poles and the spare ones, real block diagonal."""
+    return lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), spare]))
+
+
 class TestRefineDelay:
     @pytest.mark.parametrize("seed", [0, 3, 7, 12])
     def test_missing_samples_found_from_the_cost_at_the_model_poles(self, seed):
         # A core behind a delay 3 samples short: the true poles plus three spare poles near
         # z = 0 (which imitate z^-3). The fixed-pole cost stays flat up to the true delay and
         # rises after it; plants whose response starts smoothly may be read one sample long.
-        rp = random_plant(seed)
-        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
-        body = compensate_delay(session.noise.trimmed(3.0), rp.delay - 3)
-        A = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), [0.0, 0.02, -0.02]]))
-        extra, costs = refine_delay(A, body, (20.0, 5000.0), 1.0)
+        rp, body = _behind_delay(seed, -3)
+        extra, costs = refine_delay(_with_spare_poles(rp, [0.0, 0.02, -0.02]), body, BAND, 1.0)
         assert extra in (3, 4)
         assert costs.shape == (5,) and costs[3] <= costs.min() * 1.001
 
@@ -60,11 +73,8 @@ class TestRefineDelay:
     def test_window_grows_while_the_cost_still_falls(self, seed):
         # 9 samples short with 3 spare poles: the cost falls up to j = 6 (beyond the first
         # window of 4), stays flat to 9 (or one or two more for smooth starts), then rises.
-        rp = random_plant(seed)
-        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
-        body = compensate_delay(session.noise.trimmed(3.0), rp.delay - 9)
-        A = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), [0.0, 0.02, -0.02]]))
-        extra, costs = refine_delay(A, body, (20.0, 5000.0), 1.0)
+        rp, body = _behind_delay(seed, -9)
+        extra, costs = refine_delay(_with_spare_poles(rp, [0.0, 0.02, -0.02]), body, BAND, 1.0)
         assert 9 <= extra <= 11
         assert costs.size == 13 and costs[0] > 1.5 * costs.min()
 
@@ -72,41 +82,33 @@ class TestRefineDelay:
     def test_a_delay_read_long_is_shortened(self, seed):
         # The true poles behind a delay 3 samples too long: the core cannot be causal, the
         # fixed-pole cost falls below the onset's delay, and the refitted costs find the true delay.
-        rp = random_plant(seed)
-        session = random_session(seed, noise_duration=5.0, sweep_duration=0.5)
-        body = compensate_delay(session.noise.trimmed(3.0), rp.delay + 3)
-        extra, costs = refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0, delay=rp.delay + 3)
+        rp, body = _behind_delay(seed, 3)
+        extra, costs = refine_delay(rp.model.A, body, BAND, 1.0, delay=rp.delay + 3)
         assert extra == -3
         # Refitted at j = -4..0, lowest first; nothing above the onset's delay.
         assert costs.size == 9 and np.all(np.isfinite(costs[:5])) and np.all(np.isinf(costs[5:]))
         assert np.argmin(costs) == 1
         # Never below a total delay of zero: with 1 sample taken out, at most that one comes back.
-        assert -1 <= refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0, delay=1)[0] <= 0
-        assert refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0)[0] >= 0
+        assert -1 <= refine_delay(rp.model.A, body, BAND, 1.0, delay=1)[0] <= 0
+        assert refine_delay(rp.model.A, body, BAND, 1.0)[0] >= 0
 
     def test_a_cost_that_dips_past_the_answer_is_refitted(self):
         # A core fitted 3 samples short with only two spare poles imitates the missing samples
         # roughly: held fixed, its cost is lowest at the short delay, rises and dips again near
         # the true one; refitted at the answer and the dips, the poles find it.
-        rp = random_plant(0)
-        session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
-        short = compensate_delay(session.noise.trimmed(3.0), rp.delay - 3)
-        poles = np.concatenate([np.linalg.eigvals(rp.model.A), [0.3, -0.3]])
-        n = poles.size
-        fit = refine_output_error(lti.real_block_diagonal(poles), np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)),
-                                  block_data(short, (20.0, 5000.0), 1.0))
-        fixed = np.array([linear_cost(fit.A, block_data(compensate_delay(short, j), (20.0, 5000.0), 1.0))
-                          for j in range(5)])
+        rp, short = _behind_delay(0, -3)
+        A = _with_spare_poles(rp, [0.3, -0.3])
+        n = A.shape[0]
+        fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block_data(short, BAND, 1.0))
+        fixed = np.array([linear_cost(fit.A, block_data(compensate_delay(short, j), BAND, 1.0)) for j in range(5)])
         assert np.argmin(fixed) == 0 and fixed[1] > 1.5 * fixed[0] and fixed[3] < fixed[2] < fixed[1]
-        extra, costs = refine_delay(fit.A, short, (20.0, 5000.0), 1.0, delay=rp.delay - 3)
+        extra, costs = refine_delay(fit.A, short, BAND, 1.0, delay=rp.delay - 3)
         assert extra == 3
         assert np.argmin(costs) == 3 and np.isinf(costs).any()
 
     def test_a_delay_already_right_stays(self):
-        rp = random_plant(0)
-        session = random_session(0, noise_duration=5.0, sweep_duration=0.5)
-        body = compensate_delay(session.noise.trimmed(3.0), rp.delay)
-        extra, costs = refine_delay(rp.model.A, body, (20.0, 5000.0), 1.0)
+        rp, body = _behind_delay(0, 0)
+        extra, costs = refine_delay(rp.model.A, body, BAND, 1.0)
         assert extra == 0 and costs[1] > 2 * costs[0]
 
 
