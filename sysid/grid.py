@@ -122,34 +122,44 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
     singular_values = {}
     fits: dict[tuple[int, int], SubspaceFit] = {}
     seconds = {"smoothing": 0.0, "subspace": 0.0, "validation": 0.0}
+    decompositions = []
     for i, gamma in enumerate(gammas):
         t0 = time.perf_counter()
         frf = response(smooth_spectra(spectra, int(gamma)), band)
         t1 = time.perf_counter()
         decomposition = SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g, q=q, feedthrough=feedthrough)
         singular_values[int(gamma)] = decomposition.singular_values
-        responses = []
-        stable_orders = []
-        for j, order in enumerate(orders):
-            fit = decomposition.fit_if_stable(int(order))
-            if fit is None:
-                continue
+        decompositions.append(decomposition)
+        seconds["smoothing"] += t1 - t0
+        seconds["subspace"] += time.perf_counter() - t1
+        if progress:
+            progress(i + 1, gammas.size + orders.size, "grid search")
+    # Every order at every width, one order at a time: the widths' fits of one order are batched
+    # (``SubspaceDecomposition.fits_if_stable``), and so are their responses on the coarse grid.
+    for j, order in enumerate(orders):
+        t1 = time.perf_counter()
+        stable = [(i, fit) for i, fit in enumerate(SubspaceDecomposition.fits_if_stable(decompositions, int(order)))
+                  if fit is not None]
+        modal = [(i, fit) for i, fit in stable if fit.residues is not None]
+        responses = {}
+        if modal:
+            poles = np.stack([fit.poles for _, fit in modal])
+            residues = np.stack([fit.residues for _, fit in modal])
+            d = np.array([fit.D[0, 0] for _, fit in modal])
+            for k, g in enumerate(d[:, None] + (residues[:, None, :] / (z_coarse[None, :, None] - poles[:, None, :])).sum(axis=2)):
+                responses[modal[k][0]] = g
+        for i, fit in stable:
             if fit.residues is None:
-                g = lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z_coarse)
-            else:
-                g = fit.D[0, 0] + (fit.residues[None, :] / (z_coarse[:, None] - fit.poles[None, :])).sum(axis=1)
-            fits[(int(gamma), int(order))] = fit
-            responses.append(g)
-            stable_orders.append(j)
+                responses[i] = lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z_coarse)
+            fits[(int(gammas[i]), int(order))] = fit
         t2 = time.perf_counter()
         if responses:
-            rms[i, stable_orders] = validation.rms(np.array(responses))
-        t3 = time.perf_counter()
-        seconds["smoothing"] += t1 - t0
+            rows = sorted(responses)
+            rms[rows, j] = validation.rms(np.array([responses[i] for i in rows]))
         seconds["subspace"] += t2 - t1
-        seconds["validation"] += t3 - t2
+        seconds["validation"] += time.perf_counter() - t2
         if progress:
-            progress(i + 1, gammas.size, "grid search")
+            progress(gammas.size + j + 1, gammas.size + orders.size, "grid search")
     if not np.any(np.isfinite(rms)):
         raise IdentificationError("no stable model in the grid; widen --orders or --gammas")
     # Re-evaluate the best candidates exactly at every sweep bin.

@@ -21,6 +21,7 @@ __all__ = [
     "ModalForm",
     "modal_form",
     "modal_inverse",
+    "MAX_MODAL_CONDITION",
     "block_output_row",
     "frequency_response",
     "simulate",
@@ -35,7 +36,7 @@ __all__ = [
 
 # Above this eigenvector condition number the modal form loses more than about
 # half of double precision; the direct forms are used instead.
-_MAX_MODAL_CONDITION = 1e8
+MAX_MODAL_CONDITION = 1e8
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ class ModalForm:
 
     @property
     def reliable(self) -> bool:
-        return bool(np.isfinite(self.condition) and self.condition < _MAX_MODAL_CONDITION)
+        return bool(np.isfinite(self.condition) and self.condition < MAX_MODAL_CONDITION)
 
 
 def _as_siso(A, B, C, D):
@@ -69,7 +70,7 @@ def modal_inverse(V: np.ndarray) -> tuple[np.ndarray | None, float]:
     except np.linalg.LinAlgError:
         return None, np.inf
     condition = float(np.linalg.norm(V, 1) * np.linalg.norm(V_inv, 1))
-    if not (np.isfinite(condition) and condition < _MAX_MODAL_CONDITION):
+    if not (np.isfinite(condition) and condition < MAX_MODAL_CONDITION):
         return None, condition
     return V_inv, condition
 

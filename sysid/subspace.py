@@ -55,10 +55,14 @@ def fit_b_d(A: np.ndarray, C: np.ndarray, omega: np.ndarray, g: np.ndarray, feed
 
     ``eig`` may pass a precomputed (poles, eigenvectors) of A.
     """
-    n = A.shape[0]
     z = np.exp(1j * omega)
-    phi = _observation_rows(A, C, z, eig)
-    columns = [phi] + ([np.ones((z.size, 1))] if feedthrough else [])
+    return _solve_b_d(_observation_rows(A, C, z, eig), g, feedthrough, weights)
+
+
+def _solve_b_d(phi: np.ndarray, g: np.ndarray, feedthrough: bool, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """B, D minimising sum_k |w_k (g_k - D - phi_k B)|^2 (step 5), real and imaginary parts stacked."""
+    n = phi.shape[1]
+    columns = [phi] + ([np.ones((g.size, 1))] if feedthrough else [])
     regressor = np.hstack(columns)
     target = g.copy()
     if weights is not None:
@@ -222,6 +226,61 @@ class SubspaceDecomposition:
         V_inv, _ = lti.modal_inverse(V)
         residues = None if V_inv is None else (C[0] @ V) * (V_inv @ B[:, 0])
         return SubspaceFit(A, B, C, D, True, "none", poles, residues)
+
+    @staticmethod
+    def fits_if_stable(decompositions: list["SubspaceDecomposition"], n: int) -> list[SubspaceFit | None]:
+        """``fit_if_stable(n)`` of each of ``decompositions``, by one LAPACK call per step for all of them.
+
+        The seed's grid fits every order at a hundred smoothing widths of one set of frequencies:
+        a call per candidate spent most of its time in the calls' own overhead. Batched: the
+        shift-property solves (an upper-triangular R, so LU without pivoting is back substitution
+        as in ``observability``), the eigendecompositions and the inverses of the eigenvectors;
+        candidates outside the batched path (an ill-conditioned R or V, other frequencies,
+        weights) go through ``fit_if_stable`` one by one.
+        """
+        out: list[SubspaceFit | None] = [None] * len(decompositions)
+        first = decompositions[0] if decompositions else None
+        batchable = [i for i, d in enumerate(decompositions)
+                     if d.weights is None and d.feedthrough == first.feedthrough and 1 <= n <= d.max_order
+                     and (d.omega is first.omega or np.array_equal(d.omega, first.omega))]
+        single = sorted(set(range(len(decompositions))) - set(batchable))
+        if batchable:
+            r = np.stack([decompositions[i]._shift_r[:n, :n] for i in batchable])
+            rhs = np.stack([decompositions[i]._shift_rhs[:n, :n] for i in batchable])
+            diagonal = np.abs(np.diagonal(r, axis1=1, axis2=2))
+            solvable = diagonal.min(axis=1) > 1e-10 * diagonal.max(axis=1)
+            single += [i for i, ok in zip(batchable, solvable) if not ok]
+            batchable = [i for i, ok in zip(batchable, solvable) if ok]
+            A = np.linalg.solve(r[solvable], rhs[solvable])
+        if batchable:
+            C = np.stack([decompositions[i]._observability[:1, :n] for i in batchable])
+            poles, V = np.linalg.eig(A)
+            stable = np.max(np.abs(poles), axis=1) < 1.0
+            try:
+                V_inv = np.linalg.inv(V[stable])
+            except np.linalg.LinAlgError:  # a singular V among them: one by one
+                single += [i for i, ok in zip(batchable, stable) if ok]
+                stable[:] = False
+            else:
+                condition = np.abs(V[stable]).sum(axis=1).max(axis=1) * np.abs(V_inv).sum(axis=1).max(axis=1)
+                modal = np.isfinite(condition) & (condition < lti.MAX_MODAL_CONDITION)
+                single += [i for i, ok in zip(np.asarray(batchable)[stable], modal) if not ok]
+                V_inv = V_inv[modal]
+                stable[np.flatnonzero(stable)[~modal]] = False
+            if np.any(stable):
+                keep = np.flatnonzero(stable)
+                A, C, poles, V = A[keep], C[keep], poles[keep], V[keep]
+                # 5. B, D (``fit_b_d`` with the eigenvectors, ``_observation_rows``), for each candidate.
+                cv = (C @ V)[:, 0, :]
+                z = np.exp(1j * first.omega)
+                rows = (cv[:, None, :] / (z[None, :, None] - poles[:, None, :])) @ V_inv
+                for k, index in enumerate(np.asarray(batchable)[keep]):
+                    B, D = _solve_b_d(rows[k], decompositions[index].g, first.feedthrough, None)
+                    residues = cv[k] * (V_inv[k] @ B[:, 0])
+                    out[index] = SubspaceFit(A[k], B, C[k], D, True, "none", poles[k], residues)
+        for i in single:
+            out[i] = decompositions[i].fit_if_stable(n)
+        return out
 
     def fit(self, n: int, stability: str = "reflect") -> SubspaceFit:
         """The order-n model (steps 4-5) with stability handled by ``stability``."""

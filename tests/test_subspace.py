@@ -65,3 +65,30 @@ def test_bad_arguments_are_rejected():
         SubspaceDecomposition(np.arange(3.0), np.ones(4), q=2)
     with pytest.raises(IdentificationError, match="order must be between 1 and q-1"):
         SubspaceDecomposition(np.linspace(0.1, 1, 20), np.ones(20), q=5).fit(5)
+
+
+@pytest.mark.parametrize("feedthrough", [False, True])
+def test_fits_if_stable_batched_equals_one_by_one(rng, feedthrough):
+    # Noisy responses of a fourth-order plant at several noise levels: at every order some fits
+    # are stable and some not, as across the widths of the seed's grid.
+    A, B, C, D, _ = _fourth_order(rng)
+    omega = np.linspace(0.02, 2.5, 150)
+    g = lti.frequency_response(A, B, C, 0.3 if feedthrough else 0.0, np.exp(1j * omega))
+    decompositions = [SubspaceDecomposition(omega, g + level * (rng.standard_normal(g.size) + 1j * rng.standard_normal(g.size)),
+                                            q=12, feedthrough=feedthrough) for level in (0.0, 1e-3, 1e-2, 0.1, 0.3)]
+    seen = set()
+    for n in range(1, 12):
+        batched = SubspaceDecomposition.fits_if_stable(decompositions, n)
+        for decomposition, fit in zip(decompositions, batched):
+            single = decomposition.fit_if_stable(n)
+            assert (fit is None) == (single is None)
+            seen.add(fit is None)
+            if fit is None:
+                continue
+            for name in "ABCD":
+                np.testing.assert_allclose(getattr(fit, name), getattr(single, name), rtol=1e-7, atol=1e-9)
+            check = np.exp(1j * np.linspace(0.0, np.pi, 40))
+            np.testing.assert_allclose(lti.frequency_response(fit.A, fit.B, fit.C, fit.D, check),
+                                       lti.frequency_response(single.A, single.B, single.C, single.D, check),
+                                       rtol=1e-9, atol=1e-12)
+    assert seen == {True, False}  # both stable and unstable candidates were compared
