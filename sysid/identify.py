@@ -38,7 +38,7 @@ from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
 from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
-from .output_error import block_data, refine_output_error
+from .output_error import at_radius_bound, block_data, refine_output_error
 from .recordings import Recording, RecordingFile, check_same_rate
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
@@ -50,7 +50,6 @@ __all__ = ["IdentificationOptions", "Identification", "identify"]
 
 # Lower orders refitted behind a delay moved by latency.refine_delay (their poles need not imitate it).
 _FREED_ORDERS = 2
-_FREED_RADIUS_MARGIN = 1e-6
 # Out-of-band poles dropped at most from a pick whose simulation disagrees with the sweeps' spectra (_settle).
 _SETTLE_DROPS = 4
 
@@ -238,8 +237,8 @@ def _without_freed_pole(poles: np.ndarray, band: tuple[float, float], fs: float)
 def _settle(pick: OrderCandidate, pick_rms: float, block, sweep_spectra, time_rms, delay: int, options):
     """The pick with out-of-band poles run to the unit circle dropped, when that validates better in time.
 
-    A fit on the band's bins leaves spare poles free outside it; one that runs to z = 1 or
-    z = -1 (|p| at the parametrisation's margin, 1 - 1e-9) is invisible in the sweeps' spectra
+    A fit on the band's bins leaves spare poles free outside it; one that runs toward z = 1 or
+    z = -1 (|p| at the block's radius bound, ``output_error.DecayBound``) is invisible in the sweeps' spectra
     but rings in the simulated sweeps (random helmet 63, short session: sweeps' spectra 1.1x,
     simulation 118x; 41: 6.8e6x). While the time-domain validation rms ``pick_rms`` exceeds
     the spectra's (``pick.rms``) by more than ``min_gain``, the out-of-band pole nearest the
@@ -312,9 +311,10 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
                 trial_rms = time_rms(trial, delay + extra)
                 if trial.rms <= pick.rms * (1 + options.min_gain) and trial_rms < moved_rms:
                     moved, moved_rms = trial, trial_rms
-                # A pole at the parametrisation's margin (|p| = 1 - 1e-9) is a freed pole run to z = 1, not a
-                # coupling high-pass (a 5 Hz corner at 48 kHz is |p| = 0.9993).
-                settled = np.max(np.abs(np.linalg.eigvals(fit.A))) < 1 - _FREED_RADIUS_MARGIN
+                # A pole at the block's radius bound (output_error.DecayBound, 1 - 2e-5 in band on a 1 s block at 48 kHz)
+                # is a freed pole run out of the data's reach, not a coupling high-pass (a 5 Hz corner at 48 kHz is
+                # |p| = 0.9993).
+                settled = not at_radius_bound(np.linalg.eigvals(fit.A), scan_longer)
                 if drops and (not settled or trial_rms > trial.rms * (1 + options.min_gain)):
                     # The simulation disagrees with the sweeps' spectra, or a pole ran to z = 1: drop it and refit.
                     poles = _without_freed_pole(np.linalg.eigvals(fit.A), options.band, body.fs)

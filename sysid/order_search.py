@@ -77,8 +77,16 @@ class OrderCandidate:
 
 
 def sweep_rms(A, B, C, D, sweeps: list[SweepSpectrum]) -> float:
-    """Validation rms of the core (A, B, C, D) on the (delay-compensated) sweep spectra."""
-    responses = [lti.frequency_response(A, B, C, D, np.exp(2j * np.pi * s.frequencies / s.fs)) for s in sweeps]
+    """Validation rms of the core (A, B, C, D) on the (delay-compensated) sweep spectra.
+
+    Sweeps of one length share their bins: the response is evaluated once for them.
+    """
+    responses = []
+    for s in sweeps:
+        if responses and np.array_equal(s.frequencies, sweeps[0].frequencies) and s.fs == sweeps[0].fs:
+            responses.append(responses[0])
+        else:
+            responses.append(lti.frequency_response(A, B, C, D, np.exp(2j * np.pi * s.frequencies / s.fs)))
     return rms_from_responses(sweeps, responses)
 
 

@@ -17,8 +17,9 @@ linear least-squares problem in the rest,
     V(poles) = min_{B, D, x_delta} sum_k |Y_k - model_k|^2,
 
 the maximum-likelihood criterion for white output noise. Poles are parametrised so
-that every iterate is stable: a complex pair as r e^{+-j theta} with
-r = exp(-exp(sigma) - 1e-9), a real pole as (1 - 1e-9) tanh(xi).
+that every iterate is stable and no slower than the block can resolve: a complex pair as
+r e^{+-j theta} with r = exp(-exp(sigma) - m(theta)), a real pole as exp(-m) tanh(xi), m the
+block's ``DecayBound`` (1/L in band).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from .thresholds import IDENTIFICATION_BAND
 _BLAS = ThreadpoolController()
 
 __all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
-           "residual_spectrum"]
+           "residual_spectrum", "DecayBound", "at_radius_bound"]
 
 
 @dataclass
@@ -85,28 +86,124 @@ def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
     return basis
 
 
-# Pole radius stays below 1 - _MARGIN (about 1e-9: a time constant of 1e9 samples).
-_MARGIN = 1e-9
+# A pole counts as at the radius bound when its decay rate -ln|p| is within this fraction above
+# the bound's (``at_radius_bound``).
+_AT_BOUND = 0.01
+# Out of the block's band a pole's damping is bounded as a mode of this quality factor at its
+# distance from the band (``DecayBound``): the sharpest in-band modes of the random helmets (issue 10).
+_OUT_OF_BAND_Q = 50.0
+# Decay bound without a block: stability alone (|p| <= 1 - 1e-9).
+_STABLE = 1e-9
 
 
-def _poles_to_params(poles: np.ndarray) -> tuple[np.ndarray, int]:
-    """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole)."""
+@dataclass(frozen=True)
+class DecayBound:
+    """Smallest decay rate -ln|p| (per sample) the data of one block can resolve for a pole at angle theta.
+
+    In band: 1/L, a time constant -1/ln|p| no longer than the block's L samples; a slower pole
+    cannot be told from the block's transient term (the x_delta columns). Out of the band
+    [low, high] (rad/sample) the bins see a pole at distance delta only through its tail
+    ~ residue/delta, whatever its damping: there the bound is delta / (2 Q) with Q = 50, the
+    damping of a mode of that quality factor at the distance delta (1 - |p| = omega / 2Q), so
+    out-of-band modes may be as sharp relative to their distance as the sharpest in-band ones.
+    Before this bound (|p| <= 1 - 1e-9 everywhere) spare poles ran to z = 1 or z = -1 with
+    large residues cancelling in band: invisible in the sweeps' spectra, they rang in the
+    simulated sweeps (random helmet 41, short session: 10.45x the floor with the response right
+    in band; its scan's pick held a pair at 23944 Hz and a real pole at z = -1 at the bound)
+    and in a controller built on the model. Lightly damped in-band modes stay reachable: Q 50
+    at 30 Hz and 48 kHz is 1 - |p| = pi 30 / (50 48000) = 3.9e-5, above 1/L = 2.1e-5 for a 1 s
+    block (2.1e-6 for 10 s); a 5 Hz coupling high-pass (|p| = 0.99935) stays below the DC
+    bound of a 20 Hz band edge (1 - 2.6e-5).
+    """
+
+    length: int
+    low: float
+    high: float
+
+    @classmethod
+    def of(cls, data: "BlockData") -> "DecayBound":
+        angle = np.abs(np.angle(data.z))
+        return cls(data.length, float(angle.min()), float(angle.max()))
+
+    def decay(self, theta: np.ndarray) -> np.ndarray:
+        angle = np.abs(np.asarray(theta, dtype=float))
+        distance = np.maximum(np.maximum(self.low - angle, angle - self.high), 0.0)
+        return np.maximum(1.0 / self.length, distance / (2 * _OUT_OF_BAND_Q))
+
+    def slope(self, theta: np.ndarray) -> np.ndarray:
+        """d decay / d theta."""
+        theta = np.asarray(theta, dtype=float)
+        angle = np.abs(theta)
+        distance = np.maximum(self.low - angle, angle - self.high)
+        outside = distance / (2 * _OUT_OF_BAND_Q) > 1.0 / self.length
+        side = np.where(angle < self.low, -1.0, 1.0)
+        return np.where(outside, side * np.sign(theta) / (2 * _OUT_OF_BAND_Q), 0.0)
+
+
+def _decay(bound, theta) -> np.ndarray:
+    """The decay bound at the angles theta: ``bound`` a DecayBound, or one number for every angle."""
+    return bound.decay(theta) if isinstance(bound, DecayBound) else np.full(np.shape(theta), float(bound))
+
+
+def _slope(bound, theta) -> np.ndarray:
+    return bound.slope(theta) if isinstance(bound, DecayBound) else np.zeros(np.shape(theta))
+
+
+def at_radius_bound(poles: np.ndarray, data: "BlockData") -> bool:
+    """Whether any of ``poles`` sits at the block's ``DecayBound`` (decay within 1 % of it): a pole
+    the block could not hold, run out to the limit of the parametrisation."""
+    poles = np.asarray(poles)
+    if poles.size == 0:
+        return False
+    decay = -np.log(np.maximum(np.abs(poles), 1e-300))
+    return bool(np.any(decay <= (1 + _AT_BOUND) * DecayBound.of(data).decay(np.angle(poles))))
+
+
+def _real_scales(bound) -> tuple[float, float]:
+    """Largest |p| of a positive and of a negative real pole (angle 0 and pi)."""
+    return float(np.exp(-_decay(bound, 0.0))), float(np.exp(-_decay(bound, np.pi)))
+
+
+def _poles_to_params(poles: np.ndarray, bound=_STABLE) -> tuple[np.ndarray, int]:
+    """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole) under the
+    decay bound ``bound`` (a DecayBound, or one decay rate for every angle, by default _STABLE); poles
+    beyond the bound start inside it."""
     pairs = [p for p in poles if p.imag > 1e-12]
     reals = [p.real for p in poles if abs(p.imag) <= 1e-12]
     params = []
     for p in pairs:
         r = min(abs(p), 1 - 1e-12)
-        params += [np.log(max(-np.log(r) - _MARGIN, 1e-300)), np.angle(p)]
-    params += [np.arctanh(np.clip(p / (1 - _MARGIN), -1 + 1e-12, 1 - 1e-12)) for p in reals]
+        margin = float(_decay(bound, np.angle(p)))
+        # A start at or beyond the bound begins a tenth of the bound's decay inside it, where sigma still moves it.
+        params += [np.log(max(-np.log(r) - margin, 0.1 * margin)), np.angle(p)]
+    positive, negative = _real_scales(bound)
+    params += [np.arctanh(np.clip(p / (positive if p >= 0 else negative), -1 + 1e-12, 1 - 1e-12)) for p in reals]
     return np.array(params, dtype=float), len(pairs)
 
 
-def _params_to_poles(params: np.ndarray, pairs: int) -> np.ndarray:
+def _params_to_poles(params: np.ndarray, pairs: int, bound=_STABLE) -> np.ndarray:
     sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    # The margin keeps |p| below 1 in floating point however far sigma or xi run.
-    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _MARGIN)
+    # The bound keeps |p| below 1, and below what the block resolves, however far sigma or xi run.
+    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _decay(bound, theta))
     upper = r * np.exp(1j * theta)
-    return np.concatenate([upper, np.conj(upper), ((1 - _MARGIN) * np.tanh(params[2 * pairs:])).astype(complex)])
+    xi = params[2 * pairs:]
+    positive, negative = _real_scales(bound)
+    reals = np.where(xi >= 0, positive, negative) * np.tanh(xi)
+    return np.concatenate([upper, np.conj(upper), reals.astype(complex)])
+
+
+def _pole_derivatives(params: np.ndarray, pairs: int, bound) -> np.ndarray:
+    """d pole / d parameter, one per parameter: -e^sigma p and (j - d decay/d theta) p for a pair's
+    (sigma, theta) (upper pole), scale (1 - tanh^2 xi) for a real pole's xi."""
+    sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
+    upper = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _decay(bound, theta)) * np.exp(1j * theta)
+    out = np.empty(params.size, dtype=complex)
+    out[0:2 * pairs:2] = -np.exp(np.minimum(sigma, 700.0)) * upper
+    out[1:2 * pairs:2] = (1j - _slope(bound, theta)) * upper
+    xi = params[2 * pairs:]
+    positive, negative = _real_scales(bound)
+    out[2 * pairs:] = np.where(xi >= 0, positive, negative) * (1 - np.tanh(xi) ** 2)
+    return out
 
 
 @dataclass
@@ -120,17 +217,25 @@ class OutputErrorFit:
     iterations: int
 
 
-def _stacked_real(regressor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """[Re; Im] of a complex regressor, columns scaled to unit norm, and the scales.
+def _stacked_real(basis: np.ndarray, factors: list[np.ndarray],
+                  extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """[Re; Im] of the complex regressor [basis * f_1, basis * f_2, ..., extra] (each factor f a
+    vector over the bins scaling every basis column; ``extra`` one more column), columns scaled to
+    unit norm, and the scales.
 
-    Column-major (Fortran order), as LAPACK's QR takes it: a row-major copy costs the QR of a
-    100000 x 36 block a third of its time. Column scaling keeps the solve well conditioned
-    when modes differ by decades.
+    Built in place, column-major (Fortran order), as LAPACK's QR takes it: a row-major copy costs
+    the QR of a 100000 x 36 block a third of its time. Column scaling keeps the solve well
+    conditioned when modes differ by decades.
     """
-    m = regressor.shape[0]
-    real = np.empty((2 * m, regressor.shape[1]), order="F")
-    real[:m], real[m:] = regressor.real, regressor.imag
-    scale = np.linalg.norm(real, axis=0)
+    m, n = basis.shape
+    blocks = [basis * f[:, None] for f in factors] + ([extra.reshape(m, 1)] if extra is not None else [])
+    real = np.empty((2 * m, sum(b.shape[1] for b in blocks)), order="F")
+    at = 0
+    for block in blocks:
+        width = block.shape[1]
+        real[:m, at:at + width], real[m:, at:at + width] = block.real, block.imag
+        at += width
+    scale = np.sqrt(np.einsum("ij,ij->j", real, real))
     scale[scale == 0] = 1.0
     real /= scale
     return real, scale
@@ -171,10 +276,7 @@ class _Problem:
         A = lti.real_block_diagonal(poles)
         C = lti.block_output_row(A)
         basis = modal_basis(A, C, self.data.z)
-        columns = [basis * self.u_delayed[:, None], basis * self.data.z[:, None]]
-        if self.feedthrough:
-            columns.append(self.u_delayed[:, None])
-        real, scale = _stacked_real(np.hstack(columns))
+        real, scale = _stacked_real(basis, [self.u_delayed, self.data.z], self.u_delayed if self.feedthrough else None)
         return A, C, real, scale, np.concatenate([self.data.Y.real, self.data.Y.imag])
 
     def linear(self, poles):
@@ -228,19 +330,22 @@ class _Projection:
     residual is r = y - Phi theta. Kaufman's approximation of its Jacobian (Kaufman,
     BIT 15, 1975, eq. 2.5) is J_j = -P (dPhi / dx_j) theta with P = I - Q Q^T the
     projector off the range of Phi (Q from a QR factorisation). A parameter moves only
-    the pole of its own block, so dPhi/dx_j theta is the change of that block's columns
-    times their coefficients, taken here by a one-sided difference of the closed-form
-    block basis: one QR per iteration instead of one least-squares solve per parameter.
+    the pole p of its own block, so dPhi/dx_j theta is the derivative of that block's columns
+    times their coefficients, in closed form: with g = 1/(z - p) and h = 1/(z - conj p) a
+    pair's columns are (g + h)/2 and (g - h)/2j, a real pole's is g, and dg/dx = g^2 dp/dx.
+    One QR per iteration instead of one least-squares solve per parameter.
+    ``margin`` is the block's ``DecayBound``.
     """
 
     def __init__(self, problem: _Problem, pairs: int, full: bool = True):
         self.problem, self.pairs, self._full = problem, pairs, full
+        self.margin = DecayBound.of(problem.data)
         self._x = None
 
     def _solve(self, x):
         if self._x is not None and np.array_equal(x, self._x):
             return
-        poles = _params_to_poles(x, self.pairs)
+        poles = _params_to_poles(x, self.pairs, self.margin)
         _, _, real, scale, rhs = self.problem.regression(poles)
         q, r, scaled = _qr_solve(real, rhs)
         self._x, self._poles, self._q, self._r, self._scale, self._theta = x.copy(), poles, q, r, scale, scaled / scale
@@ -255,29 +360,27 @@ class _Projection:
         p, theta, n, pairs = self.problem, self._theta, self._poles.size, self.pairs
         z, u = p.data.z, p.u_delayed
         m = z.size
-        # Every parameter moves the pole of its own block only: one-sided differences of the
-        # closed-form block bases, all parameters at once (columns), then one projection.
-        steps = 1e-7 * np.maximum(1.0, np.abs(x))
+        # Every parameter moves the pole of its own block only: the closed-form derivatives of the
+        # block bases, all parameters at once (columns), then one projection.
         count = x.size
         j = np.arange(count)
-        # Pole of each parameter (upper poles of the pairs first, then the real poles) and its first state.
-        index = np.where(j < 2 * pairs, j // 2, j)
+        # First state of each parameter's block (the pairs' blocks first, then the real poles).
         state = np.where(j < 2 * pairs, 2 * (j // 2), j)
-        moved = np.array([_params_to_poles(x + step * np.eye(count)[k], pairs)[index[k]]
-                          for k, step in enumerate(steps)])
-        old = self._poles[index]
-        is_pair = np.arange(count) < 2 * pairs
+        is_pair = j < 2 * pairs
         zc = z[:, None]
         pc, rc = np.flatnonzero(is_pair), np.flatnonzero(~is_pair)
+        dp = _pole_derivatives(x, pairs, self.margin)
         first = np.empty((m, count), dtype=complex)
         second = np.zeros((m, count), dtype=complex)
-        # Pair blocks: columns (z - a) / den and b / den; real poles: 1 / (z - p).
-        a_new, b_new, a_old, b_old = moved[pc].real, moved[pc].imag, old[pc].real, old[pc].imag
-        den_new = (zc - a_new) ** 2 + b_new**2
-        den_old = (zc - a_old) ** 2 + b_old**2
-        first[:, pc] = ((zc - a_new) / den_new - (zc - a_old) / den_old) / steps[pc]
-        second[:, pc] = (b_new / den_new - b_old / den_old) / steps[pc]
-        first[:, rc] = (1.0 / (zc - moved[rc].real) - 1.0 / (zc - old[rc].real)) / steps[rc]
+        # Pair blocks: columns (g + h) / 2 and (g - h) / 2j; real poles: g (see the class docstring).
+        upper = self._poles[:pairs]
+        g2 = (1.0 / (zc - upper)) ** 2
+        h2 = (1.0 / (zc - np.conj(upper))) ** 2
+        dg = g2[:, pc // 2] * dp[pc]
+        dh = h2[:, pc // 2] * np.conj(dp[pc])
+        first[:, pc] = 0.5 * (dg + dh)
+        second[:, pc] = -0.5j * (dg - dh)
+        first[:, rc] = dp[rc] / (zc - self._poles[rc].real) ** 2
         next_state = np.minimum(state + 1, n - 1)
         second_b = np.where(is_pair, theta[next_state], 0.0)
         second_x = np.where(is_pair, theta[n + next_state], 0.0)
@@ -325,8 +428,9 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
         raise IdentificationError("output-error refinement needs a model of order at least 1")
     if np.max(np.abs(poles)) >= 1:
         raise IdentificationError("output-error refinement needs a stable starting model")
-    params, pairs = _poles_to_params(poles)
     problem = _Problem(data, delay, feedthrough, prefilter, input_noise_variance)
+    margin = DecayBound.of(data)
+    params, pairs = _poles_to_params(poles, margin)
     projection = _Projection(problem, pairs)
 
     start = projection.residual(params)
@@ -337,11 +441,11 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
                                               ftol=1.0 / start.size if noise_tolerance else 1e-8)
     # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
     # result is not stable and the starting poles are kept instead.
-    stable = np.all(np.abs(_params_to_poles(result.x, pairs)) < 1.0)
+    stable = np.all(np.abs(_params_to_poles(result.x, pairs, margin)) < 1.0)
     x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
     solve = problem.linear if input_noise_variance is None else problem.bias_compensated
     with _BLAS.limit(limits=1, user_api="blas"):
-        A_new, C_new, theta, final = solve(_params_to_poles(x, pairs))
+        A_new, C_new, theta, final = solve(_params_to_poles(x, pairs, margin))
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
     D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])

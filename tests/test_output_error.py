@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sysid import lti
+from sysid import lti, output_error
 from sysid.errors import IdentificationError
 from sysid.output_error import block_data, refine_output_error
 from sysid.plants import appendix_a_model
@@ -62,3 +62,56 @@ def test_noise_tolerance_stops_early_at_the_same_cost_within_one_noise_variance(
     assert quick.iterations < full.iterations
     assert quick.cost_after <= full.cost_after * (1 + 1.0 / residuals)
     assert quick.cost_after < 0.5 * quick.cost_before
+
+
+def test_jacobian_matches_central_differences_in_and_out_of_band(rng):
+    # The closed-form derivatives of the block bases, with the decay bound's slope out of band
+    # (pairs at 0.6 and 2.9 rad/sample lie outside the 20 Hz-5 kHz bins of a 48 kHz block).
+    data = block_data(_noise_recording(appendix_a_model("ff"), rng, seconds=0.5, output_noise=1e-3), max_seconds=None)
+    upper = 0.99 * np.exp(1j * np.array([0.01, 0.6, 1.5, 2.9]))
+    poles = np.concatenate([upper, np.conj(upper), [0.5, -0.3]])
+    problem = output_error._Problem(data, 0, False)
+    bound = output_error.DecayBound.of(data)
+    x, pairs = output_error._poles_to_params(poles, bound)
+    projection = output_error._Projection(problem, pairs)
+    jacobian = projection.jacobian(x)
+    for k in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[k]))
+        step = np.zeros_like(x)
+        step[k] = h
+        numeric = (projection.residual(x + step) - projection.residual(x - step)) / (2 * h)
+        assert np.linalg.norm(jacobian[:, k] - numeric) <= 1e-3 * np.linalg.norm(numeric)
+
+
+def test_spare_poles_stay_within_what_the_block_resolves(rng):
+    # A spare pair and two real poles started next to z = -1 and z = 1: out of the fitted band
+    # nothing holds them; the decay bound keeps every pole at or inside what the block resolves.
+    plant = appendix_a_model("ff")
+    data = block_data(_noise_recording(plant, rng, seconds=1.0, output_noise=1e-3), max_seconds=None)
+    spare = np.array([0.9999 * np.exp(3.1j), 0.9999 * np.exp(-3.1j), -0.9999, 0.99999])
+    poles = np.concatenate([np.linalg.eigvals(plant.A), spare])
+    n = poles.size
+    fit = refine_output_error(lti.real_block_diagonal(poles), np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)),
+                              data, max_iterations=20)
+    found = np.linalg.eigvals(fit.A)
+    decay = -np.log(np.maximum(np.abs(found), 1e-300))
+    assert np.all(decay >= output_error.DecayBound.of(data).decay(np.angle(found)) * (1 - 1e-6))
+    # With the bound at 1 - 1e-9 everywhere (before), a spare pair ran to |p| = 1 - 1e-9 at 13.4 kHz and two real
+    # poles to z = 1 - 1e-9 on this block.
+    assert np.max(np.abs(found)) < 1 - 1e-5
+
+
+def test_a_lightly_damped_bass_mode_stays_reachable(rng):
+    # Q 50 at 30 Hz and 48 kHz: 1 - |p| = 3.9e-5, above the in-band bound 1/L = 2.1e-5 of a 1 s block.
+    fs, omega = 48000.0, 2 * np.pi * 30.0 / 48000.0
+    pole = np.exp(-omega / (2 * 50.0) + 1j * omega)
+    A = lti.real_block_diagonal(np.array([pole, np.conj(pole), 0.6]))
+    B, C, D = np.array([[1e-3], [2e-3], [0.3]]), lti.block_output_row(A), np.zeros((1, 1))
+    u = rng.standard_normal(int(1.5 * fs)) * 0.1
+    y = lti.simulate(A, B, C, D, u)
+    data = block_data(Recording(u[int(0.5 * fs):], y[int(0.5 * fs):], fs, "noise"), max_seconds=None)
+    start = lti.real_block_diagonal(np.array([pole * 0.9999 * np.exp(0.002j), np.conj(pole) * 0.9999 * np.exp(-0.002j), 0.5]))
+    fit = refine_output_error(start, np.zeros((3, 1)), np.zeros((1, 3)), np.zeros((1, 1)), data)
+    assert fit.cost_after < 1e-12 * fit.cost_before
+    found = np.linalg.eigvals(fit.A)
+    assert np.min(np.abs(found - pole)) < 1e-7
