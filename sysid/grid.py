@@ -20,7 +20,7 @@ from threadpoolctl import threadpool_limits
 
 from . import lti
 from .errors import IdentificationError
-from .spectra import Spectra, smooth_spectra, response
+from .spectra import Spectra, smoothed_responses
 from .subspace import SubspaceDecomposition, SubspaceFit
 from .validation import CompressedValidation, SweepSpectrum, rms_from_responses
 
@@ -123,14 +123,14 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
     fits: dict[tuple[int, int], SubspaceFit] = {}
     seconds = {"smoothing": 0.0, "subspace": 0.0, "validation": 0.0}
     decompositions = []
-    for i, gamma in enumerate(gammas):
-        t0 = time.perf_counter()
-        frf = response(smooth_spectra(spectra, int(gamma)), band)
+    t0 = time.perf_counter()
+    responses_smoothed = smoothed_responses(spectra, gammas, band)
+    seconds["smoothing"] += time.perf_counter() - t0
+    for i, (gamma, frf) in enumerate(zip(gammas, responses_smoothed)):
         t1 = time.perf_counter()
         decomposition = SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g, q=q, feedthrough=feedthrough)
         singular_values[int(gamma)] = decomposition.singular_values
         decompositions.append(decomposition)
-        seconds["smoothing"] += t1 - t0
         seconds["subspace"] += time.perf_counter() - t1
         if progress:
             progress(i + 1, gammas.size + orders.size, "grid search")
@@ -143,11 +143,9 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
         modal = [(i, fit) for i, fit in stable if fit.residues is not None]
         responses = {}
         if modal:
-            poles = np.stack([fit.poles for _, fit in modal])
-            residues = np.stack([fit.residues for _, fit in modal])
-            d = np.array([fit.D[0, 0] for _, fit in modal])
-            for k, g in enumerate(d[:, None] + (residues[:, None, :] / (z_coarse[None, :, None] - poles[:, None, :])).sum(axis=2)):
-                responses[modal[k][0]] = g
+            g = lti.pole_residue_response(np.stack([fit.poles for _, fit in modal]), np.stack([fit.residues for _, fit in modal]),
+                                          np.array([fit.D[0, 0] for _, fit in modal]), z_coarse)
+            responses.update((i, row) for (i, _), row in zip(modal, g))
         for i, fit in stable:
             if fit.residues is None:
                 responses[i] = lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z_coarse)
@@ -166,13 +164,21 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
     t0 = time.perf_counter()
     flat = np.argsort(np.where(np.isfinite(rms), rms, np.inf), axis=None)[:keep_best]
     best = []
+    # Repeats of one sweep share their bins: each distinct set of bins is evaluated once.
+    bins: list[SweepSpectrum] = []
+    which = []
+    for s in sweeps:
+        same = [k for k, t in enumerate(bins) if t.fs == s.fs and np.array_equal(t.frequencies, s.frequencies)]
+        if not same:
+            bins.append(s)
+        which.append(same[0] if same else len(bins) - 1)
     for index in flat:
         i, j = np.unravel_index(index, rms.shape)
         if not np.isfinite(rms[i, j]):
             break
         fit = fits[(int(gammas[i]), int(orders[j]))]
-        exact = rms_from_responses(sweeps, [
-            lti.frequency_response(fit.A, fit.B, fit.C, fit.D, np.exp(2j * np.pi * s.frequencies / s.fs)) for s in sweeps])
+        responses = [lti.frequency_response(fit.A, fit.B, fit.C, fit.D, np.exp(2j * np.pi * s.frequencies / s.fs)) for s in bins]
+        exact = rms_from_responses(sweeps, [responses[k] for k in which])
         best.append(Candidate(int(gammas[i]), int(orders[j]), fit, exact))
     best.sort(key=lambda c: c.rms)
     seconds["validation"] += time.perf_counter() - t0

@@ -48,6 +48,7 @@ __all__ = [
     "parzen_lag_window",
     "smooth_spectra",
     "smoothed_response",
+    "smoothed_responses",
     "response",
 ]
 
@@ -187,17 +188,29 @@ def parzen_lag_window(gamma: int, n: int) -> np.ndarray:
 
 def smooth_spectra(spectra: Spectra, gamma: int) -> Spectra:
     """Blackman-Tukey smoothing of all three spectra with the Parzen lag window of width gamma."""
+    s_uu, s_yu, s_yy = _smoothed(spectra, [gamma])
+    return Spectra(spectra.fs, spectra.nperseg, s_uu[0], s_yu[0], s_yy[0], spectra.estimator, spectra.segments)
+
+
+def _smoothed(spectra: Spectra, gammas) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(s_uu, s_yu, s_yy) smoothed at each width in ``gammas`` (rows): each spectrum's correlation
+    estimate (inverse DFT) once, times every width's lag window, transformed back in one call."""
     n = spectra.nperseg
-    if gamma > n // 2:
-        raise IdentificationError(f"smoothing width gamma={gamma} exceeds half the segment length ({n // 2} samples)")
-    window = parzen_lag_window(gamma, n)
+    if max(gammas) > n // 2:
+        raise IdentificationError(f"smoothing width gamma={max(gammas)} exceeds half the segment length ({n // 2} samples)")
+    windows = np.array([parzen_lag_window(int(gamma), n) for gamma in gammas])
 
     def smooth(s):
-        return np.fft.rfft(np.fft.irfft(s, n) * window)
+        return np.fft.rfft(np.fft.irfft(s, n)[None, :] * windows, axis=1)
 
-    s_uu = smooth(spectra.s_uu).real
-    s_yy = smooth(spectra.s_yy).real
-    return Spectra(spectra.fs, n, s_uu, smooth(spectra.s_yu), s_yy, spectra.estimator, spectra.segments)
+    return smooth(spectra.s_uu).real, smooth(spectra.s_yu), smooth(spectra.s_yy).real
+
+
+def smoothed_responses(spectra: Spectra, gammas, band: tuple[float, float]) -> list[FrequencyResponse]:
+    """``smoothed_response`` at each width in ``gammas`` (the seed's grid smooths at a hundred)."""
+    s_uu, s_yu, s_yy = _smoothed(spectra, gammas)
+    return [response(Spectra(spectra.fs, spectra.nperseg, s_uu[i], s_yu[i], s_yy[i], spectra.estimator, spectra.segments),
+                     band) for i in range(len(gammas))]
 
 
 def smoothed_response(spectra: Spectra, gamma: int, band: tuple[float, float]) -> FrequencyResponse:
