@@ -35,6 +35,19 @@ SERIES_FACTORS = ("resonance", "highpass", "lowpass")
 LATENCY_SHORT_BY_AT_MOST = 4
 
 
+def rolloff_lag(session) -> int:
+    """Samples a delay line may read past the pure delay by holding the plant's own roll-offs.
+
+    A first-order low-pass of corner fc lags like fs / (2 pi fc) samples of pure delay below fc
+    (its group delay at DC), and its response starts as t, or t^2 behind two: its first samples are
+    too small for the data to tell from delay (random helmet 100 FF, roll-offs at 3.0 and 5.2 kHz,
+    3.7 samples: refitted output-error costs within 0.23 % of each other over total delays 31-38, the
+    true one 34). Whole samples, rounded up; 0 for a plant without roll-offs."""
+    generator = session.truth.get("generator", {})
+    lag = sum(generator["fs"] / (2 * np.pi * fc) for fc in generator.get("rolloff_hz", ()))
+    return int(np.ceil(lag))
+
+
 def within(name, value, truth) -> bool:
     value = value[0] if isinstance(value, list) else value
     tolerance = TOLERANCE[name]
@@ -53,8 +66,10 @@ def check_workflow(session, path, kinds, drawn):
         if kind == "delay":
             # The hidden delay adds to the plant's own (a random helmet has 0-64 samples of its own).
             total = truth + session.truth["base_plant"].get("delay", 0)
-            assert total - LATENCY_SHORT_BY_AT_MOST <= model.delay <= total, (total, model.delay, text)
-            assert hit is not None or findings.comparison.ratio <= AT_FLOOR, text
+            longest = total + rolloff_lag(session)
+            assert total - LATENCY_SHORT_BY_AT_MOST <= model.delay <= longest, (total, longest, model.delay, text)
+            # Held by the model, the delay is nothing missing (no finding to ask for); with other effects
+            # the model is above the floor for them, and refine --auto below judges the end.
             continue
         if kind in SERIES_FACTORS:
             # Identified on its own session a series factor is part of the path: the model holds it
