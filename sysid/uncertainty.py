@@ -75,6 +75,8 @@ NOISE_BINS = 129
 MISFIT_BINS = 9
 # Bins per chunk of the Jacobian, to keep memory to tens of MB at any block length.
 _CHUNK = 8192
+# Samples per fine step of the pole powers p^t of the free response (``_pole_powers``).
+_POWER_STEP = 512
 _CHI2_2_95 = float(scipy.stats.chi2.ppf(0.95, 2))
 _WELCH_HANN_50 = 1.056
 
@@ -137,6 +139,38 @@ def _step(params: np.ndarray) -> np.ndarray:
     return 1e-6 * np.maximum(1.0, np.abs(params))
 
 
+def _pole_jacobian(problem: _Problem, params: np.ndarray, pairs: int, theta: np.ndarray, idx: slice) -> np.ndarray:
+    """d model_k / d params at the bins idx by central differences (bins x parameters).
+
+    A parameter moves one pole (a pair's sigma or theta, a real pole's xi), and the model
+    is a sum over the modal blocks of ``modal_basis``, so only that block's columns
+    change: its difference alone is the difference of the whole model, without the
+    others' round-off, at a fraction of the cost of rebuilding the regressor.
+    """
+    n = 2 * pairs + (params.size - 2 * pairs)
+    z = problem.data.z[idx]
+    u = problem.u_delayed[idx]
+    h = _step(params)
+    out = np.empty((z.size, params.size), dtype=complex)
+    for i in range(params.size):
+        up, down = params.copy(), params.copy()
+        up[i] += h[i]
+        down[i] -= h[i]
+        # Pair j (parameters 2j, 2j+1) is the upper pole j and the states 2j, 2j+1; the real pole of
+        # parameter i >= 2 pairs is pole i and state i (``_params_to_poles``, ``lti.real_block_diagonal``).
+        pair = i < 2 * pairs
+        pole = i // 2 if pair else i
+        states = slice(2 * pole, 2 * pole + 2) if pair else slice(i, i + 1)
+        blocks = []
+        for moved in (up, down):
+            p = _params_to_poles(moved, pairs)[pole]
+            A = lti.real_block_diagonal(np.array([p, np.conj(p)]) if pair else np.array([p]))
+            blocks.append(modal_basis(A, lti.block_output_row(A), z))
+        difference = (blocks[0] - blocks[1]) / (2 * h[i])
+        out[:, i] = (difference @ theta[:n][states]) * u + (difference @ theta[n:2 * n][states]) * z
+    return out
+
+
 def parameter_covariance(model: Model, data: BlockData) -> _Linearisation:
     """Linearised covariance of the modal output-error parameters on ``data`` (module docstring, part 1)."""
     if model.order == 0:
@@ -150,7 +184,6 @@ def parameter_covariance(model: Model, data: BlockData) -> _Linearisation:
     poles = _params_to_poles(params, pairs)
     problem = _Problem(data, model.delay, feedthrough=bool(model.D[0, 0] != 0.0))
     theta = problem.linear(poles)[2]
-    h = _step(params)
     p = params.size + theta.size
     bins = data.z.size
     if 2 * bins <= p:
@@ -169,14 +202,8 @@ def parameter_covariance(model: Model, data: BlockData) -> _Linearisation:
     meat = np.zeros((p, p))
     for start in range(0, bins, _CHUNK):
         idx = slice(start, min(start + _CHUNK, bins))
-        columns = []
-        for i in range(params.size):
-            up, down = params.copy(), params.copy()
-            up[i] += h[i]
-            down[i] -= h[i]
-            columns.append((_design(problem, _params_to_poles(up, pairs), idx) @ theta
-                            - _design(problem, _params_to_poles(down, pairs), idx) @ theta) / (2 * h[i]))
-        J = np.hstack([np.stack(columns, axis=1), _design(problem, poles, idx)]) if columns else _design(problem, poles, idx)
+        design = _design(problem, poles, idx)
+        J = np.hstack([_pole_jacobian(problem, params, pairs, theta, idx), design]) if params.size else design
         information += (J.conj().T @ J).real
         weighted = J * np.sqrt(noise[idx] / 2)[:, None]
         meat += (weighted.conj().T @ weighted).real
@@ -234,6 +261,21 @@ def _h1_variance(model_response: np.ndarray, coherence: np.ndarray, averages: in
     return (1 - c) / (n_eff * c) * np.abs(model_response) ** 2
 
 
+def _pole_powers(poles: np.ndarray, start: int, count: int) -> np.ndarray:
+    """p^t for t = start .. start + count - 1 (rows) and each pole p (columns).
+
+    With t = a L + b (L = ``_POWER_STEP``) p^t = (p^L)^a p^b: one complex power per
+    b < L and per a, and one product per sample, where a complex power per sample
+    (exp and log each) took 1.6 s of CPU for 15 poles over 10 s at 48 kHz. Each factor
+    carries a few ulp of relative error, as p^t itself would.
+    """
+    t = np.arange(start, start + count)
+    first = t[0] // _POWER_STEP
+    coarse = poles[None, :] ** (np.arange(first, t[-1] // _POWER_STEP + 1) * _POWER_STEP)[:, None]
+    fine = poles[None, :] ** np.arange(_POWER_STEP)[:, None]
+    return coarse[t // _POWER_STEP - first] * fine[t % _POWER_STEP]
+
+
 def _free_response_fit(model: Model, residual: np.ndarray) -> np.ndarray:
     """The model's free response C A^t x0 (t = 0, 1, ...) closest to ``residual`` in least squares.
 
@@ -247,21 +289,21 @@ def _free_response_fit(model: Model, residual: np.ndarray) -> np.ndarray:
     if poles.size == 0:
         return np.zeros_like(residual)
 
-    def columns(t):
-        powers = poles[None, :] ** t[:, None]
+    def columns(start, stop):
+        powers = _pole_powers(poles, start, stop - start)
         return np.hstack([powers.real, powers[:, poles.imag > 0].imag])
 
     gram, rhs = 0.0, 0.0
     for start in range(0, residual.size, _CHUNK * 8):
-        t = np.arange(start, min(start + _CHUNK * 8, residual.size))
-        X = columns(t)
+        stop = min(start + _CHUNK * 8, residual.size)
+        X = columns(start, stop)
         gram = gram + X.T @ X
-        rhs = rhs + X.T @ residual[t]
+        rhs = rhs + X.T @ residual[start:stop]
     coefficients = np.linalg.lstsq(gram, rhs, rcond=1e-12)[0]
     free = np.empty_like(residual)
     for start in range(0, residual.size, _CHUNK * 8):
-        t = np.arange(start, min(start + _CHUNK * 8, residual.size))
-        free[t] = columns(t) @ coefficients
+        stop = min(start + _CHUNK * 8, residual.size)
+        free[start:stop] = columns(start, stop) @ coefficients
     return free
 
 

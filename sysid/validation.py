@@ -30,6 +30,8 @@ __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses
            "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
+# Above this largest prime factor of a length, numpy's DFT takes Bluestein's route (``_rfft_pair``).
+_BLUESTEIN_PRIME = 1000
 VALIDATION_BAND = (20.0, 4000.0)
 
 
@@ -44,6 +46,33 @@ class SweepSpectrum:
     fs: float
 
 
+def _largest_prime_factor(n: int) -> int:
+    largest, p = 1, 2
+    while p * p <= n:
+        while n % p == 0:
+            n //= p
+            largest = p
+        p += 1
+    return max(largest, n)
+
+
+def _rfft_pair(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rfft(u), rfft(y)) of two real signals of one length.
+
+    A length with a large prime factor (a sweep shortened by a delay of d samples: 477561 =
+    3 7 22741) goes through Bluestein's algorithm, where one complex DFT of u + j y costs about
+    what one real DFT does: U_k = (Z_k + conj(Z_{N-k})) / 2, Y_k = (Z_k - conj(Z_{N-k})) / 2j
+    halves the time (0.29 -> 0.16 s of CPU for 9 s at 48 kHz). Other lengths keep the real DFTs.
+    """
+    n = u.size
+    if _largest_prime_factor(n) <= _BLUESTEIN_PRIME:
+        return np.fft.rfft(u), np.fft.rfft(y)
+    Z = np.fft.fft(u + 1j * y)
+    half = Z[:n // 2 + 1]
+    mirrored = np.conj(Z[-np.arange(n // 2 + 1) % n])
+    return (half + mirrored) / 2, (half - mirrored) / 2j
+
+
 def sweep_spectrum(sweep: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S) -> SweepSpectrum:
     first = int(round(skip_s * sweep.fs))
     u, y = sweep.u[first:], sweep.y[first:]
@@ -51,7 +80,8 @@ def sweep_spectrum(sweep: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_
         raise IdentificationError(f"{sweep.path}: too short for validation")
     f = np.fft.rfftfreq(u.size, 1 / sweep.fs)
     inside = (f >= band[0]) & (f <= band[1])
-    return SweepSpectrum(f[inside], np.fft.rfft(u)[inside], np.fft.rfft(y)[inside], u.size, sweep.fs)
+    U, Y = _rfft_pair(u, y)
+    return SweepSpectrum(f[inside], U[inside], Y[inside], u.size, sweep.fs)
 
 
 def band_energy(error_bins: np.ndarray, length: int) -> float:

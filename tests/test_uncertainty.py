@@ -139,6 +139,38 @@ class TestFrequencyResponseBand:
         np.testing.assert_allclose(band.relative_95, band.variance_95)
 
 
+class TestInternals:
+    def test_pole_jacobian_is_the_whole_models_central_difference(self, ff_case):
+        # Only the moved pole's block changes; its difference must be the whole model's.
+        from sysid.output_error import _params_to_poles, _poles_to_params, _Problem
+        from sysid.uncertainty import _design, _pole_jacobian, _step
+
+        _, model, _, data = ff_case
+        params, pairs = _poles_to_params(np.linalg.eigvals(model.A))
+        problem = _Problem(data, model.delay, feedthrough=bool(model.D[0, 0] != 0.0))
+        theta = problem.linear(_params_to_poles(params, pairs))[2]
+        idx = slice(0, 3000)
+        jacobian = _pole_jacobian(problem, params, pairs, theta, idx)
+        h = _step(params)
+        scale = np.max(np.abs(_design(problem, _params_to_poles(params, pairs), idx) @ theta))
+        for i in range(params.size):
+            up, down = params.copy(), params.copy()
+            up[i] += h[i]
+            down[i] -= h[i]
+            whole = (_design(problem, _params_to_poles(up, pairs), idx) @ theta
+                     - _design(problem, _params_to_poles(down, pairs), idx) @ theta) / (2 * h[i])
+            # The whole model's difference carries the round-off of the unmoved blocks, eps |model| / h.
+            np.testing.assert_allclose(jacobian[:, i], whole, rtol=1e-7, atol=1e3 * np.finfo(float).eps * scale / h[i])
+
+    @pytest.mark.parametrize("start, count", [(0, 5000), (123457, 3000), (7, 1)])
+    def test_pole_powers_equal_direct_powers(self, start, count):
+        from sysid.uncertainty import _pole_powers
+
+        poles = np.array([0.9999 * np.exp(0.3j), 0.999999 * np.exp(0.001j), -0.5 + 0.1j, 0.97])
+        t = np.arange(start, start + count)
+        np.testing.assert_allclose(_pole_powers(poles, start, count), poles[None, :] ** t[:, None], rtol=1e-11, atol=1e-300)
+
+
 class TestModelField:
     def _model(self):
         return appendix_a_model("ff")

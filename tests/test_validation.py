@@ -52,3 +52,13 @@ def test_compressed_validation_matches_exact_rms(sessions, cell_hz, tolerance):
         coarse = gain * lti.frequency_response(plant.A, plant.B, plant.C, plant.D, z)
         exact = rms_from_responses(spectra, [gain * plant.frequency_response(s.frequencies) for s in spectra])
         assert compressed.rms(coarse[None, :])[0] == pytest.approx(exact, rel=tolerance)
+
+
+@pytest.mark.parametrize("length", [1000, 4001, 2 * 3 * 5 * 7 * 11, 3 * 7 * 2741, 2 * 1009, 1103])
+def test_sweep_spectrum_equals_the_real_dfts_at_any_length(length):
+    # Lengths with a large prime factor take one complex DFT of u + j y; the bins must be the real DFTs'.
+    rng = np.random.default_rng(length)
+    u, y = rng.standard_normal(length), rng.standard_normal(length)
+    spectrum = sweep_spectrum(Recording(u, y, 8000.0), band=(0.0, 4000.0), skip_s=0.0)
+    np.testing.assert_allclose(spectrum.U, np.fft.rfft(u), rtol=0, atol=1e-12 * np.sqrt(length))
+    np.testing.assert_allclose(spectrum.Y, np.fft.rfft(y), rtol=0, atol=1e-12 * np.sqrt(length))
