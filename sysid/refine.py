@@ -26,6 +26,7 @@ from .compare import Comparison, compare
 from .diagnose import diagnose
 from .effect_spec import EffectSpec, parse_effect
 from .errors import HelmetAncError, IdentificationError
+from .findings.input_noise import bound_ratio
 from .identify import IdentificationOptions
 from .model import Model
 from .recordings import Recording
@@ -219,17 +220,21 @@ def _step_key(specs: list[EffectSpec], model: Model) -> str:
                       sort_keys=True)
 
 
-def _passes(accept: str, before: Comparison, after: Comparison, needed: float) -> bool:
+def _passes(accept: str, before: Comparison, after: Comparison, needed: float, bound: float = 1.0) -> bool:
     """Whether a step lowered the error by an effect's rule (``Effect.accept``); ``needed``: the run-to-run
-    noise of the validation rms (FS)."""
+    noise of the validation rms (FS); ``bound``: the validation rms over the floor that no model gets
+    below (the input channel's noise through the refined model, ``sysid.findings.input_noise.bound_ratio``)."""
     if accept == "full-band":
         # An offset lives at DC, outside the validation band: it must lower the full-band rms
         # and leave the in-band rms within its run-to-run noise.
         return after.rms_full < (1.0 - RUN_TO_RUN_MIN) * before.rms_full and after.rms <= before.rms + needed
     if accept == "not-worse":
         # The errors-in-variables estimator removes a bias of the response that the validation
-        # rms cannot show (the sweeps' own input noise passes through the path); kept unless worse.
-        return after.rms <= before.rms + needed
+        # rms cannot show (the sweeps' own input noise passes through the path): H1, biased low by
+        # 1 / (1 + S_nn/S_uu), is the least-squares predictor from the noisy input, so an unbiased
+        # response predicts a little worse (rms^2 floor^2 + |G|^2 P_n against floor^2 + |H1|^2 ... ).
+        # Kept unless worse than both the model before and the bound the input noise sets on it.
+        return after.rms <= max(before.rms, bound * after.noise_floor) + needed
     return after.rms < before.rms - needed
 
 
@@ -263,24 +268,29 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     stop_reason = f"step limit ({max_steps} steps)"
     diagnosis = None  # of the current model: a rejected step leaves the model, so its diagnosis, as it was
     while len(steps) < max_steps:
-        at_floor = current.ratio <= AT_FLOOR
         if diagnosis is None:
             diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
+        bound, bounding = _error_bound(diagnosis)
+        # At the floor, or at the bound an effect sets that no model gets below (the input noise).
+        at_floor = current.ratio <= AT_FLOOR * bound
         auto_effects, corrections = _auto_effects(), _corrections()
-        unmodellable = [f["effect"] for f in diagnosis.significant if f["effect"] not in auto_effects]
+        bounds = {f.effect for f in bounding_findings(diagnosis)}
+        unmodellable = bounding + [f["effect"] for f in diagnosis.significant
+                                   if f["effect"] not in auto_effects and f["effect"] not in bounds]
         accepted = sum(1 for step in steps if step.accepted)
         candidates = [f for f in diagnosis.significant
                       if f["effect"] in auto_effects and _allowed(f["effect"], rejected, retried, accepted)]
-        if at_floor:
-            # At the floor in band; only a data correction (an offset at DC) can still lower the error.
-            candidates = [f for f in candidates if f["effect"] in corrections]
-            if not candidates:
-                stop_reason = "at the floor" + (f"; effects that cannot be modelled: {', '.join(unmodellable)}"
-                                                if unmodellable else "")
-                break
         # The estimator choice is made once; the data keep showing input noise afterwards.
         if any(step.get("effect") == "input-noise" for step in model.history):
             candidates = [f for f in candidates if f["effect"] != "input-noise"]
+        if at_floor:
+            # At the floor in band; only a data correction (an offset at DC) can still lower the error,
+            # or, at a bound, the estimator that removes the bias the bound's noise puts in the response.
+            candidates = [f for f in candidates if f["effect"] in corrections or f["effect"] in bounds]
+            if not candidates:
+                stop_reason = ("at the floor" if current.ratio <= AT_FLOOR else "at the bound the data set") + (
+                    f"; effects that cannot be modelled: {', '.join(unmodellable)}" if unmodellable else "")
+                break
         candidates.sort(key=lambda f: f["effect"] not in corrections)
         specs = [(f, _auto_spec(f)) for f in candidates]
         specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
@@ -320,7 +330,10 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         step = result.step
         step.score = score
         # A combined correction is kept when it passes the rule of any correction it applies.
-        step.accepted = any(_passes(registry.get(s.kind).accept, current, result.after, needed) for s in chosen)
+        after_bound = max([1.0] + [bound_ratio(result.model, sweeps, result.after.noise_floor)
+                                    for s in chosen if s.kind == "input-noise"])
+        step.accepted = any(_passes(registry.get(s.kind).accept, current, result.after, needed, after_bound)
+                            for s in chosen)
         if not step.accepted:
             step.note = (f"lowered the rms by {current.rms - result.after.rms:.2e} FS, not more than the run-to-run "
                          f"noise {needed:.2e} FS" if result.after.rms < current.rms else
@@ -337,6 +350,24 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         if current.ratio <= AT_FLOOR:
             stop_reason = "at the floor"
     return AutoRefinement(model, steps, stop_reason, start, current)
+
+
+def bounding_findings(diagnosis) -> list:
+    """The significant findings that bound the validation error from below (``evidence["bounds_the_error"]``,
+    their ``params["bound_ratio"]`` the rms over the floor no model gets below: the input channel's noise)."""
+    return [f for f in diagnosis.significant if f.evidence.get("bounds_the_error")]
+
+
+def _error_bound(diagnosis) -> tuple[float, list[str]]:
+    """(the largest bound over the floor among ``bounding_findings``, 1 if none; each named with its bound)."""
+    found = bounding_findings(diagnosis)
+    named = []
+    for f in found:
+        snr = f.params.get("input_snr_db")
+        named.append(f"{f.effect} (" + (f"input SNR {snr:.1f} dB: " if snr is not None else "")
+                     + f"its noise through the path bounds the validation error at {f.params['bound_ratio']:.2f}x "
+                     f"the noise floor)")
+    return max([1.0] + [f.params["bound_ratio"] for f in found]), named
 
 
 def format_refinement(steps, stop_reason: str | None = None) -> str:

@@ -8,8 +8,10 @@ from sysid.corrections import resample_ear
 from sysid.diagnose import diagnose, format_findings
 from sysid.model import Model
 from sysid.refine import format_refinement, refine_auto
+from sysid.refits import clock_residual
 
 from effect_sessions import TEST_REFIT, effect_case, reference_case
+from effect_units import true_session
 
 
 def test_resampling_undoes_a_fast_ear_clock():
@@ -36,3 +38,14 @@ def test_drift_is_found_with_its_sign_and_corrected(ppm, word, case, tmp_path):
     auto.model.save(tmp_path / "m.json")
     again = Model.load(tmp_path / "m.json")
     assert compare(again, session.sweeps).rms == pytest.approx(compare(auto.model, session.sweeps).rms, rel=1e-9)
+
+
+@pytest.mark.parametrize("error_ppm", [-1.0, 0.3])
+def test_the_residual_reads_the_clock_ratio_to_hundredths_of_a_ppm(error_ppm):
+    # The segments' phase slopes read a drift of a few ppm; the model's residual on the noise
+    # recording refines the ratio further (a sharp mode needs it to a few 0.01 ppm).
+    session = true_session("fb", 5, ("clock-drift:60",))
+    model = Model.from_dict(session.truth["base_plant"])
+    model.clock_ratio = 1 + (60 + error_ppm) * 1e-6
+    delta = clock_residual(model, session.noise, 3.0)
+    assert (model.clock_ratio * (1 + delta) - 1) * 1e6 == pytest.approx(60.0, abs=0.05)

@@ -1,8 +1,10 @@
-"""input-noise: the input noise density read from the repeated sweeps."""
+"""input-noise: the input noise density read from the repeated sweeps, the bound it sets on the validation error."""
 
 import pytest
 
-from sysid.findings.input_noise import input_noise_density, input_noise_finding
+from sysid.compare import compare
+from sysid.findings.input_noise import bound_ratio, input_noise_density, input_noise_finding
+from sysid.model import Model
 
 from effect_units import true_context, true_session
 
@@ -18,3 +20,23 @@ def test_the_density_of_white_input_noise_is_read_from_the_sweeps():
 def test_input_noise_is_significant_only_when_present():
     assert input_noise_finding(true_context("ff", 5, ("input-noise:5",)))["significant"]
     assert not input_noise_finding(true_context("ff", 5, ()))["significant"]
+
+
+def test_the_bound_is_what_the_true_path_validates_at():
+    # The input's own noise through the path is in every prediction: the true path itself validates
+    # at the bound, far above the floor, and the finding names it with the input SNR read two ways.
+    session = true_session("ff", 5, ("input-noise:5",))
+    model = Model.from_dict(session.truth["base_plant"])
+    comparison = compare(model, session.sweeps)
+    assert comparison.ratio > 3.0
+    assert bound_ratio(model, session.sweeps, comparison.noise_floor) == pytest.approx(comparison.ratio, rel=0.1)
+    found = input_noise_finding(true_context("ff", 5, ("input-noise:5",)))
+    assert found["significant"] and found["evidence"]["bounds_the_error"]
+    assert found["params"]["bound_ratio"] == pytest.approx(comparison.ratio, rel=0.1)
+    assert found["params"]["input_snr_db"] == pytest.approx(5.0, abs=1.0)
+    assert found["evidence"]["input_snr_coherence_db"] == pytest.approx(5.0, abs=1.5)
+
+
+def test_no_bound_without_input_noise():
+    found = input_noise_finding(true_context("ff", 5, ()))
+    assert found["params"]["bound_ratio"] < 1.1 and not found["evidence"]["bounds_the_error"]

@@ -3,8 +3,13 @@
 import numpy as np
 import pytest
 
+from sysid.compare import compare
+from sysid.findings import DiagnosisContext
 from sysid.findings.nonlinearity import nonlinearity_finding, polynomial_columns
+from sysid.model import Model
+from sysid.random_plant import random_session
 
+from conftest import SHORT
 from effect_units import true_context
 
 
@@ -28,3 +33,14 @@ def test_harmonic_levels_are_estimated(h2, h3):
 
 def test_nothing_on_a_linear_path():
     assert not nonlinearity_finding(true_context("ff", 5, ()))["significant"]
+
+
+def test_levels_are_stated_at_the_sessions_largest_input():
+    # simulate states the levels at the session's largest input; on random helmet 100 the noise
+    # recording's peaks lie 2.6 dB above the sweeps' amplitude (read at the sweeps': H2 2.6 dB low).
+    session = random_session(100, "fb", effects=["input-nonlinearity:-33.4,-35.7"], **SHORT)
+    assert np.max(np.abs(session.noise.u)) > 1.2 * max(np.max(np.abs(s.u)) for s in session.sweeps)
+    model = Model.from_dict(session.truth["base_plant"])
+    found = nonlinearity_finding(DiagnosisContext(model, session.noise, session.sweeps, compare(model, session.sweeps)))
+    assert found["params"]["h2_db"] == pytest.approx(-33.4, abs=1.0)
+    assert found["params"]["h3_db"] == pytest.approx(-35.7, abs=1.0)

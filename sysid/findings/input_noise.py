@@ -6,6 +6,15 @@ floor). Taken as white, its one-sided density is P_n = rms^2 / (f_hi - f_lo). Th
 noise recording's input density S_uu then gives the input SNR and the bias of H1,
     H1 = H / (1 + S_nn / S_uu),
 so the magnitude is low by 10 log10(1 + S_nn/S_uu) dB (0.41 dB at 10 dB SNR).
+The coherence of input and ear signal on the noise recording gives the SNR a second
+way: gamma^2 = 1 / ((1 + S_nn/S_uu)(1 + S_ee/S_yy')), the ear's own noise density
+S_ee from the noise floor (Bendat & Piersol, Random Data, 4th ed., sec. 9.2.4).
+
+No model predicts the ear signal from the measured input better than the input's own
+noise allows (errors in variables): the noise n on the measured input passes through
+the path into every prediction, so the validation rms of even the true path is
+    rms^2 = floor^2 + int_band |G(f)|^2 P_n df
+(``input_noise_error``); the finding states that bound in multiples of the floor.
 """
 
 from __future__ import annotations
@@ -14,13 +23,16 @@ import numpy as np
 import scipy.signal
 
 from ..recordings import Recording
+from ..thresholds import AT_FLOOR
 from ..validation import VALIDATION_BAND, noise_floor
 from . import DiagnosisContext, finding
 
-__all__ = ["input_noise_finding", "input_noise_density"]
+__all__ = ["input_noise_finding", "input_noise_density", "input_noise_error", "bound_ratio"]
 
 BIAS_DB = 0.1
 BIAS_BAND = (20.0, 1500.0)
+# Input noise "bounds" the validation error when the bound it sets is above this many times the floor.
+BOUND_EXCESS = 1.1
 
 
 def input_noise_density(sweeps: list[Recording], band=VALIDATION_BAND) -> float:
@@ -28,6 +40,33 @@ def input_noise_density(sweeps: list[Recording], band=VALIDATION_BAND) -> float:
     a, b = sweeps
     rms = noise_floor(Recording(a.u, a.u, a.fs, a.path), Recording(b.u, b.u, b.fs, b.path), band)
     return rms**2 / (band[1] - band[0])
+
+
+def input_noise_error(model, density: float, band=VALIDATION_BAND) -> float:
+    """RMS (FS) in band of white input noise of one-sided density ``density`` (FS^2/Hz) through the
+    model's linear part: sqrt(int_band |G(f)|^2 density df), on a 1 Hz grid."""
+    f = np.arange(band[0], band[1] + 1.0)
+    return float(np.sqrt(density * np.sum(np.abs(model.frequency_response(f)) ** 2)))
+
+
+def bound_ratio(model, sweeps: list[Recording], noise_floor: float) -> float:
+    """The validation rms over the floor that the input channel's noise leaves even for the true path:
+    sqrt(floor^2 + e_n^2) / floor, e_n = ``input_noise_error`` (the model stands in for the path)."""
+    error = input_noise_error(model, input_noise_density(sweeps))
+    return float(np.hypot(noise_floor, error) / noise_floor) if noise_floor > 0 else float("inf")
+
+
+def _coherence_snr_db(ctx: DiagnosisContext) -> float:
+    """Median input SNR (dB) in ``BIAS_BAND`` from the coherence of the noise recording (module docstring)."""
+    body = ctx.body
+    f, coherence = scipy.signal.coherence(body.u, body.y, ctx.fs, nperseg=2205)
+    _, s_yy = scipy.signal.welch(body.y - body.y.mean(), ctx.fs, nperseg=2205)
+    ear_noise = ctx.comparison.noise_floor**2 / (VALIDATION_BAND[1] - VALIDATION_BAND[0])
+    inside = (f >= BIAS_BAND[0]) & (f <= BIAS_BAND[1])
+    ear_part = np.maximum(s_yy[inside] - ear_noise, 1e-30) / s_yy[inside]
+    # gamma^2 = SNR_in / (1 + SNR_in) * ear_part
+    share = np.clip(coherence[inside] / ear_part, 1e-12, 1 - 1e-12)
+    return float(10 * np.log10(np.median(share / (1 - share))))
 
 
 def input_noise_finding(ctx: DiagnosisContext) -> dict:
@@ -39,17 +78,33 @@ def input_noise_finding(ctx: DiagnosisContext) -> dict:
     bias = 10 * np.log10(1 + 1 / snr)
     median_bias = float(np.median(bias))
     snr_db = float(10 * np.log10(np.median(snr)))
+    error = input_noise_error(ctx.model, density)
+    floor = ctx.comparison.noise_floor
+    bound = float(np.hypot(floor, error) / floor) if floor > 0 else float("inf")
     compensated = str(ctx.model.identification.get("estimator", "")).startswith("bias-compensated")
-    significant = median_bias >= BIAS_DB and not compensated
-    if significant:
+    biased = median_bias >= BIAS_DB and not compensated
+    # The bound explains an error above the floor that no refinement removes: named while it does.
+    bounds = bound >= BOUND_EXCESS and ctx.excess >= AT_FLOOR
+    significant = biased or bounds
+    limit = (f"; its noise passes through the path into every prediction, so no model validates below "
+             f"{bound:.1f}x the noise floor (now {ctx.excess:.1f}x): errors in variables" if bound >= BOUND_EXCESS else "")
+    if biased:
         explanation = (f"the input channel carries its own noise ({np.sqrt(density * (VALIDATION_BAND[1] - VALIDATION_BAND[0])):.2e} "
                        f"FS in band, seen in the two sweeps' input difference): input SNR {snr_db:.1f} dB on the noise "
                        f"recording, so H1 and the model are biased low by {median_bias:.2f} dB "
-                       f"(the FF input is itself a microphone)")
+                       f"(the FF input is itself a microphone){limit}")
     elif compensated:
-        explanation = f"input SNR {snr_db:.1f} dB; the model's estimator already compensates the H1 bias"
+        explanation = f"input SNR {snr_db:.1f} dB; the model's estimator already compensates the H1 bias{limit}"
     else:
-        explanation = f"input SNR {snr_db:.0f} dB: the H1 bias ({median_bias:.3f} dB) is negligible"
-    return finding("input-noise", significant, median_bias / BIAS_DB,
-                   {"input_snr_db": snr_db, "bias_db": median_bias, "input_noise_density": density},
-                   explanation, "refine --add input-noise" if significant else "none", {})
+        explanation = f"input SNR {snr_db:.0f} dB: the H1 bias ({median_bias:.3f} dB) is negligible{limit}"
+    remedy = ("refine --add input-noise (errors-in-variables estimate); only a quieter input channel (reference "
+              "microphone, its preamplifier) gets below the bound" if biased else
+              "a quieter input channel (reference microphone, its preamplifier): no model gets below the bound"
+              if bounds else "none")
+    score = max(median_bias / BIAS_DB, bound / BOUND_EXCESS if bounds else 0.0)
+    return finding("input-noise", significant, score,
+                   {"input_snr_db": snr_db, "bias_db": median_bias, "input_noise_density": density,
+                    "bound_ratio": bound},
+                   explanation, remedy,
+                   {"input_snr_coherence_db": _coherence_snr_db(ctx), "input_noise_error_fs": error,
+                    "bounds_the_error": bounds})

@@ -5,7 +5,8 @@ regressed on L(u), L(u^2 - mean), L(u^3): a polynomial v = a1 u + a2 u^2 + a3 u^
 in front of L predicts e = L(v) - L(u), fitted in the validation band. The u^2 and u^3 columns put energy at 2f
 and 3f of the sweep's instantaneous frequency, where a linear misfit at f has none.
 For u = A sin, a2 u^2 gives a second harmonic a2 A/2 and a3 u^3 a third a3 A^2/4
-relative to the fundamental.
+relative to the fundamental; the levels are stated for A the session's largest input
+amplitude (noise recording and sweeps), as ``simulate --effect input-nonlinearity`` gives them.
 """
 
 from __future__ import annotations
@@ -71,7 +72,10 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     chi2 = e.size * (energy_linear - energy_full) / energy_full if energy_full > 0 else 0.0
     a1 = 1.0 + coef[0]
     a2, a3 = coef[1] / a1, coef[2] / a1
-    amplitude = float(max(np.max(np.abs(s.u)) for s in ctx.sweeps))
+    # The harmonic levels are stated at the session's largest input (as ``simulate`` states them): the
+    # noise recording's peaks, a few standard deviations of its excitation, lie above the sweeps'
+    # amplitude (random helmets: 1.6-5.4 dB, so H2 read 1.6-5.4 dB and H3 twice that too low).
+    amplitude = float(max(np.max(np.abs(r.u)) for r in (ctx.noise, *ctx.sweeps)))
     h2 = 20 * np.log10(max(abs(a2) * amplitude / 2, 1e-12))
     h3 = 20 * np.log10(max(abs(a3) * amplitude**2 / 4, 1e-12))
     # Harmonics above -10 dB are no loudspeaker or amplifier nonlinearity but a sign that the
@@ -80,7 +84,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     significant = explained >= EXPLAINED and chi2 >= CHI2 and plausible
     score = min(explained / EXPLAINED, chi2 / CHI2)
     explanation = (f"the residual follows u^2 and u^3 through the path: second harmonic {h2:.1f} dB and third "
-                   f"{h3:.1f} dB at the sweep amplitude {amplitude:.3g} FS (headphone Bl(x)/Kms(x) or amplifier); "
+                   f"{h3:.1f} dB at the session's largest input {amplitude:.3g} FS (headphone Bl(x)/Kms(x) or amplifier); "
                    f"they explain {100 * explained:.0f} % of the remaining error")
     return finding("input-nonlinearity", significant, score,
                    {"a2": a2, "a3": a3, "h2_db": h2, "h3_db": h3, "amplitude_fs": amplitude},
