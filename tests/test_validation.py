@@ -54,7 +54,7 @@ def test_compressed_validation_matches_exact_rms(sessions, cell_hz, tolerance):
         assert compressed.rms(coarse[None, :])[0] == pytest.approx(exact, rel=tolerance)
 
 
-@pytest.mark.parametrize("length", [1000, 4001, 2 * 3 * 5 * 7 * 11, 3 * 7 * 2741, 2 * 1009, 1103])
+@pytest.mark.parametrize("length", [1000, 4001, 2 * 3 * 5 * 7 * 11, 3 * 7 * 2741, 2 * 1009, 1103, 2 * 3 * 881])
 def test_sweep_spectrum_equals_the_real_dfts_at_any_length(length):
     # Lengths with a large prime factor take one complex DFT of u + j y; the bins must be the real DFTs'.
     rng = np.random.default_rng(length)
