@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lti
-from .output_error import BlockData, linear_cost, refine_output_error, residual_spectrum
+from .output_error import BlockData, added_pole_costs, linear_cost, refine_output_error, residual_spectrum
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
 from .thresholds import AT_FLOOR
 from .validation import SweepSpectrum, band_energy, rms_from_responses
@@ -136,7 +136,8 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
     imitate it badly. Instead of guessing the frequency from the residual, every pair of a
     fixed log-spaced set is screened by the fixed-pole cost (one linear solve each) added
     to the model the pipeline would pick (the lowest order within ``min_gain`` of the best
-    rms), and the best few are refined at order n + 2.
+    rms; the model's own columns factored once, ``output_error.added_pole_costs``), and the best
+    few are refined at order n + 2.
     """
     frequencies_hz = np.abs(np.angle(block.z)) * block.fs / (2 * np.pi)
     grid = np.geomspace(max(frequencies_hz.min(), 1.0), frequencies_hz.max(), _INSERT_FREQUENCIES)
@@ -149,11 +150,11 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
         if n > max_order:
             return
         poles = np.linalg.eigvals(base.A)
-        screened = []
-        for frequency in grid:
-            for q in _INSERT_Q:
-                A = lti.real_block_diagonal(np.concatenate([poles, _pair(2 * np.pi * frequency / block.fs, q)]))
-                screened.append((linear_cost(A, block, feedthrough=feedthrough), frequency, q, A))
+        trials = [(frequency, q, _pair(2 * np.pi * frequency / block.fs, q)) for frequency in grid for q in _INSERT_Q]
+        # The fixed-pole cost of each trial, the base's columns factored once (``added_pole_costs``).
+        costs = added_pole_costs(base.A, [pair for _, _, pair in trials], block, feedthrough=feedthrough)
+        screened = [(cost, frequency, q, lti.real_block_diagonal(np.concatenate([poles, pair])))
+                    for cost, (frequency, q, pair) in zip(costs, trials)]
         screened.sort(key=lambda item: item[0])
         for _, frequency, q, A in screened[:_INSERT_REFINED]:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,

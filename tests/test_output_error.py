@@ -115,3 +115,30 @@ def test_a_lightly_damped_bass_mode_stays_reachable(rng):
     assert fit.cost_after < 1e-12 * fit.cost_before
     found = np.linalg.eigvals(fit.A)
     assert np.min(np.abs(found - pole)) < 1e-7
+
+
+def test_added_pole_costs_equal_the_fixed_pole_cost_of_the_joined_poles(rng):
+    data = block_data(_noise_recording(appendix_a_model("fb"), rng, seconds=0.5, output_noise=1e-3), max_seconds=None)
+    base = lti.real_block_diagonal(np.array([0.99 * np.exp(0.05j), 0.99 * np.exp(-0.05j), 0.8]))
+    added = [np.array([r * np.exp(1j * w), r * np.exp(-1j * w)]) for r, w in ((0.995, 0.01), (0.9, 0.3), (0.99, 0.05))]
+    added.append(np.array([0.3]))
+    costs = output_error.added_pole_costs(base, added, data)
+    for cost, extra in zip(costs, added):
+        joined = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(base), extra]))
+        assert cost == pytest.approx(output_error.linear_cost(joined, data), rel=1e-8)
+
+
+def test_least_squares_through_the_gram_matrix_or_householder_equal_lstsq(rng):
+    # Well conditioned: the Cholesky factor of the Gram matrix (Q implicit); nearly coinciding
+    # columns (condition 1e8): the Householder factors. Both give lstsq's solution and projector.
+    well = rng.standard_normal((400, 6))
+    ill = well.copy()
+    ill[:, 5] = ill[:, 4] + 1e-8 * rng.standard_normal(400)
+    rhs = rng.standard_normal(400)
+    for matrix, implicit in ((well, True), (ill, False)):
+        matrix = matrix / np.linalg.norm(matrix, axis=0)
+        factor, x = output_error._qr_solve(np.asfortranarray(matrix), rhs)
+        assert (factor.q is None) == implicit
+        expected = np.linalg.lstsq(matrix, rhs, rcond=None)[0]
+        np.testing.assert_allclose(matrix @ x, matrix @ expected, atol=1e-7)
+        np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ expected, atol=1e-7)
