@@ -8,7 +8,7 @@ step 10 x order 1..20 = 2000 candidates) timed stage by stage over several repea
 
 Run:  python benchmarks/bench_identify.py [--repeats 5]   (prints a Markdown section)
 
-With ``--random N [--first F]`` it instead runs the random helmets of seeds F..F+N-1 (``sysid.random_plant``,
+With ``--random N [--first F]`` (or ``--seeds 0-14`` / ``--seeds 0,1,5,12``) it instead runs the random helmets of seeds F..F+N-1 (``sysid.random_plant``,
 thesis-length sessions: 23 s noise, two 9 s sweeps) side by side in one run: the seed's grid
 alone (no latency, no refinement) and the full pipeline, each against the true plant.
 """
@@ -127,18 +127,30 @@ def _why(r: dict, label: str) -> str:
     return ", ".join(x for x in reasons if x)
 
 
-def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: int = 0, full_only: bool = False) -> None:
+def _seed_list(text: str) -> list[int]:
+    """Seeds from '0-14' or '0,1,5,12' (ranges and single seeds, comma-separated)."""
+    seeds = []
+    for part in text.split(","):
+        low, _, high = part.strip().partition("-")
+        seeds += list(range(int(low), int(high or low) + 1))
+    return seeds
+
+
+def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: int = 0, full_only: bool = False,
+                seeds: list[int] | None = None) -> None:
     labels = (("full", "full pipeline"),) if full_only else (("grid", "seed grid alone"), ("full", "full pipeline"))
     rows = []
-    for seed in range(first, first + count):
+    seeds = list(range(first, first + count)) if seeds is None else seeds
+    for seed in seeds:
         rows.append(bench_random(seed, noise_seconds, sweep_seconds, full_only))
         r = rows[-1]
         print(f"<!-- seed {seed}: true n {r['order']} d {r['delay']}; " + "; ".join(
             f"{k} rms {r[k]['rms']:.2f}x frf {r[k]['frf']:.3f} n {r[k]['order']} d {r[k]['delay']} {r[k]['wall']:.1f} s "
             f"CPU {r[k]['cpu']:.1f} s" for k, _ in labels) + " -->", flush=True)
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    selection = f"--seeds {','.join(map(str, seeds))}" if seeds != list(range(first, first + count)) else f"--random {count} --first {first}"
     print(f"\nMachine: {_cpu_model()}, {__import__('os').cpu_count()} cores, date {time.strftime('%Y-%m-%d')}. "
-          f"Command: `python benchmarks/bench_identify.py --random {count} --first {first} --noise-seconds "
+          f"Command: `python benchmarks/bench_identify.py {selection} --noise-seconds "
           f"{noise_seconds:g} --sweep-seconds {sweep_seconds:g}{' --full-only' if full_only else ''}`. Peak resident memory of the process: {peak_mib:.0f} MiB.\n")
     print("| method | at floor (rms <= 1.2x, FRF <= 5 %) | and delay within 2 | median / worst rms/floor | "
           "median / worst FRF error | order chosen - true (median, range) | delay error (range) | "
@@ -171,7 +183,12 @@ def main() -> None:
     parser.add_argument("--noise-seconds", type=float, default=23.0)
     parser.add_argument("--sweep-seconds", type=float, default=9.0)
     parser.add_argument("--full-only", action="store_true", help="with --random: the full pipeline only, not the grid alone")
+    parser.add_argument("--seeds", type=_seed_list, default=None, metavar="LIST",
+                        help="random helmets of these seeds instead of --random/--first, e.g. 0-14 or 0,1,5,12")
     args = parser.parse_args()
+    if args.seeds:
+        main_random(len(args.seeds), args.noise_seconds, args.sweep_seconds, full_only=args.full_only, seeds=args.seeds)
+        return
     if args.random:
         main_random(args.random, args.noise_seconds, args.sweep_seconds, args.first, args.full_only)
         return
