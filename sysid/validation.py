@@ -27,11 +27,11 @@ from .errors import IdentificationError
 from .recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
-           "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "SKIP_S", "VALIDATION_BAND"]
+           "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
 # Above this largest prime factor of a length numpy's DFT is slow (long generic passes or Bluestein's
-# algorithm), and one complex DFT costs about what one real one does (``_rfft_pair``).
+# algorithm), and one complex DFT costs about what one real one does (``rfft_pair``).
 _SLOW_PRIME = 600
 VALIDATION_BAND = (20.0, 4000.0)
 
@@ -57,7 +57,7 @@ def _largest_prime_factor(n: int) -> int:
     return max(largest, n)
 
 
-def _rfft_pair(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rfft_pair(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(rfft(u), rfft(y)) of two real signals of one length.
 
     A length with a large prime factor (a sweep shortened by a delay of d samples: 477561 =
@@ -82,7 +82,7 @@ def sweep_spectrum(sweep: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_
         raise IdentificationError(f"{sweep.path}: too short for validation")
     f = np.fft.rfftfreq(u.size, 1 / sweep.fs)
     inside = (f >= band[0]) & (f <= band[1])
-    U, Y = _rfft_pair(u, y)
+    U, Y = rfft_pair(u, y)
     return SweepSpectrum(f[inside], U[inside], Y[inside], u.size, sweep.fs)
 
 
@@ -203,9 +203,9 @@ def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, 
 def simulated_rms(model, sweeps: list[Recording], band=VALIDATION_BAND, skip_s: float = SKIP_S) -> float:
     """The model's validation rms by time-domain simulation of each whole sweep from rest."""
     errors = [(sweep.y - model.simulate(sweep.u))[int(round(skip_s * sweep.fs)):] for sweep in sweeps]
-    # Two repeats of one length: their DFTs as a pair (``_rfft_pair``).
+    # Two repeats of one length: their DFTs as a pair (``rfft_pair``).
     if len(errors) == 2 and errors[0].size == errors[1].size:
-        spectra = _rfft_pair(*errors)
+        spectra = rfft_pair(*errors)
     else:
         spectra = [np.fft.rfft(error) for error in errors]
     energy = 0.0
