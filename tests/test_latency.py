@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sysid import lti
-from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay
+from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay, without_lines
 from sysid.model import Model
 from sysid.output_error import block_data, linear_cost, refine_output_error
 from sysid.random_plant import random_plant, random_session
@@ -91,6 +91,29 @@ class TestRefineDelay:
         # Never below a total delay of zero: with 1 sample taken out, at most that one comes back.
         assert -1 <= refine_delay(rp.model.A, body, BAND, 1.0, delay=1)[0] <= 0
         assert refine_delay(rp.model.A, body, BAND, 1.0)[0] >= 0
+
+    def test_a_delay_read_long_beyond_the_first_window_is_found(self):
+        # 7 samples too long (modes that outlast the Welch segment raise the onset's threshold): the
+        # window grows downwards while its first cost is the smallest, and the refitted costs decide.
+        rp, body = _behind_delay(0, 7)
+        extra, costs = refine_delay(rp.model.A, body, BAND, 1.0, delay=rp.delay + 7)
+        assert extra == -7
+        assert costs.size == 13 and np.argmin(costs) == 1
+
+    def test_hum_is_taken_out_before_the_delay_is_judged(self):
+        # An engine order (41.7 Hz and two harmonics) 80 times the sensor noise: no delay fits it, and
+        # left in the cost it read this delay 7 samples long (j = +4). Fitted and taken out, the true
+        # delay is found.
+        rp, body = _behind_delay(3, 3)
+        t = np.arange(body.y.size) / body.fs
+        hum = sum(1e-2 / k * np.sin(2 * np.pi * 41.7 * k * t + k) for k in (1, 2, 3))
+        hummed = Recording(body.u, body.y + hum, body.fs)
+        cleaned = without_lines(hummed, BAND, rp.model.A)
+        # The core's linear step, fitted with the hum in, bends a little towards a line near a mode.
+        assert np.std(cleaned.y - body.y) < 0.2 * np.std(hum)
+        assert without_lines(body, BAND, rp.model.A) is body
+        extra, _ = refine_delay(rp.model.A, hummed, BAND, 1.0, delay=rp.delay + 3)
+        assert extra == -3
 
     def test_a_cost_that_dips_past_the_answer_is_refitted(self):
         # A core fitted 3 samples short with only two spare poles imitates the missing samples
