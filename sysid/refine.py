@@ -138,7 +138,14 @@ def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, opti
         raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
     before = before or compare(model, sweeps)
     params = _complete(spec, model, noise, sweeps, before, transient_s)
-    refined, extra = registry.get(spec.kind).build(model, noise, sweeps, params, options, transient_s)
+    effect = registry.get(spec.kind)
+    refined, extra = effect.build(model, noise, sweeps, params, options, transient_s)
+    if refined.clock_ratio != 1.0 and effect.correct is None and refined.stable:
+        # The clock ratio was read against a model that lacked this structure, whose misfit (harmonics,
+        # say) biased the reading: read again against the refined model, kept only if it pays.
+        tuned = refits.refined_clock(refined, noise, sweeps, options, transient_s)
+        if tuned.clock_ratio != refined.clock_ratio:
+            refined, extra = tuned, {**extra, "clock_ratio": tuned.clock_ratio}
     return _refinement(model, refined, spec.kind, params, extra, before, sweeps)
 
 
