@@ -233,8 +233,9 @@ class SubspaceDecomposition:
 
         The seed's grid fits every order at a hundred smoothing widths of one set of frequencies:
         a call per candidate spent most of its time in the calls' own overhead. Batched: the
-        shift-property solves (an upper-triangular R, so LU without pivoting is back substitution
-        as in ``observability``), the eigendecompositions and the inverses of the eigenvectors;
+        shift-property solves (``np.linalg.solve`` on R: its LU has no row exchanges, the entries below
+        R's diagonal being zero, and is the back substitution of ``observability``), the
+        eigendecompositions and the inverses of the eigenvectors;
         candidates outside the batched path (an ill-conditioned R or V, other frequencies,
         weights) go through ``fit_if_stable`` one by one.
         """

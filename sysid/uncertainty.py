@@ -147,7 +147,7 @@ def _pole_jacobian(problem: _Problem, params: np.ndarray, pairs: int, theta: np.
     change: its difference alone is the difference of the whole model, without the
     others' round-off, at a fraction of the cost of rebuilding the regressor.
     """
-    n = 2 * pairs + (params.size - 2 * pairs)
+    n = params.size  # one parameter per pole: the model's order
     z = problem.data.z[idx]
     u = problem.u_delayed[idx]
     h = _step(params)
