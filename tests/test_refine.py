@@ -77,6 +77,19 @@ def test_input_noise_refinement_removes_the_gain_bias():
     assert result.model.identification["estimator"].startswith("bias-compensated")
 
 
+@pytest.mark.slow
+def test_auto_names_the_bound_the_input_noise_sets():
+    # Errors in variables: the input's own noise through the path is in every prediction, so the true
+    # path itself validates far above the floor; refine --auto ends near that bound and says so.
+    session, model = effect_case("ff", 5, ("input-noise:5",))
+    truth = compare(session.plant, session.sweeps).ratio
+    auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
+    text = format_refinement(auto.steps, auto.stop_reason)
+    assert truth > 3.0
+    assert "cannot be modelled: input-noise (input SNR" in auto.stop_reason, text
+    assert auto.after.ratio <= 1.2 * truth, text
+
+
 def test_auto_finds_and_fixes_delay_and_hum_together():
     session, model = effect_case("ff", 6, ("delay:23", "periodic-disturbance:50,2,1e-3"))
     auto = refine_auto(model, session.noise, session.sweeps, TEST_REFIT)
