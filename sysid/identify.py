@@ -238,7 +238,7 @@ def _settle(pick: OrderCandidate, pick_rms: float, block, sweep_spectra, time_rm
     """The pick with out-of-band poles run to the unit circle dropped, when that validates better in time.
 
     A fit on the band's bins leaves spare poles free outside it; one that runs toward z = 1 or
-    z = -1 (|p| at the block's radius bound, ``output_error.DecayBound``) is invisible in the sweeps' spectra
+    z = -1 (|p| at the block's radius bound, ``output_error.decay_bound``) is invisible in the sweeps' spectra
     but rings in the simulated sweeps (random helmet 63, short session: sweeps' spectra 1.1x,
     simulation 118x; 41: 6.8e6x). While the time-domain validation rms ``pick_rms`` exceeds
     the spectra's (``pick.rms``) by more than ``min_gain``, the out-of-band pole nearest the
@@ -311,7 +311,7 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
                 trial_rms = time_rms(trial, delay + extra)
                 if trial.rms <= pick.rms * (1 + options.min_gain) and trial_rms < moved_rms:
                     moved, moved_rms = trial, trial_rms
-                # A pole at the block's radius bound (output_error.DecayBound, 1 - 2e-5 in band on a 1 s block at 48 kHz)
+                # A pole at the block's radius bound (output_error.decay_bound, 1 - 2e-5 on a 1 s block at 48 kHz)
                 # is a freed pole run out of the data's reach, not a coupling high-pass (a 5 Hz corner at 48 kHz is
                 # |p| = 0.9993).
                 settled = not at_radius_bound(np.linalg.eigvals(fit.A), scan_longer)

@@ -18,8 +18,8 @@ linear least-squares problem in the rest,
 
 the maximum-likelihood criterion for white output noise. Poles are parametrised so
 that every iterate is stable and no slower than the block can resolve: a complex pair as
-r e^{+-j theta} with r = exp(-exp(sigma) - m(theta)), a real pole as exp(-m) tanh(xi), m the
-block's ``DecayBound`` (1/L in band).
+r e^{+-j theta} with r = exp(-exp(sigma) - 1/L), a real pole as exp(-1/L) tanh(xi), L the
+block's length (``decay_bound``).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from .thresholds import IDENTIFICATION_BAND
 _BLAS = ThreadpoolController()
 
 __all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
-           "residual_spectrum", "added_pole_costs", "DecayBound", "at_radius_bound"]
+           "residual_spectrum", "added_pole_costs", "decay_bound", "at_radius_bound"]
 
 
 @dataclass
@@ -89,122 +89,70 @@ def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
 # A pole counts as at the radius bound when its decay rate -ln|p| is within this fraction above
 # the bound's (``at_radius_bound``).
 _AT_BOUND = 0.01
-# Out of the block's band a pole's damping is bounded as a mode of this quality factor at its
-# distance from the band (``DecayBound``): the sharpest in-band modes of the random helmets (issue 10).
-_OUT_OF_BAND_Q = 50.0
 # Decay bound without a block: stability alone (|p| <= 1 - 1e-9).
 _STABLE = 1e-9
 # Largest condition number of a regressor solved through its Gram matrix (``_Factor``).
 _GRAM_CONDITION = 1e5
 
 
-@dataclass(frozen=True)
-class DecayBound:
-    """Smallest decay rate -ln|p| (per sample) the data of one block can resolve for a pole at angle theta.
+def decay_bound(data: "BlockData") -> float:
+    """Smallest decay rate -ln|p| (per sample) of a pole refined on the block: 1/L, L its length.
 
-    In band: 1/L, a time constant -1/ln|p| no longer than the block's L samples; a slower pole
-    cannot be told from the block's transient term (the x_delta columns). Out of the band
-    [low, high] (rad/sample) the bins see a pole at distance delta only through its tail
-    ~ residue/delta, whatever its damping: there the bound is delta / (2 Q) with Q = 50, the
-    damping of a mode of that quality factor at the distance delta (1 - |p| = omega / 2Q), so
-    out-of-band modes may be as sharp relative to their distance as the sharpest in-band ones.
-    Before this bound (|p| <= 1 - 1e-9 everywhere) spare poles ran to z = 1 or z = -1 with
-    large residues cancelling in band: invisible in the sweeps' spectra, they rang in the
-    simulated sweeps (random helmet 41, short session: 10.45x the floor with the response right
-    in band; its scan's pick held a pair at 23944 Hz and a real pole at z = -1 at the bound)
-    and in a controller built on the model. Lightly damped in-band modes stay reachable: Q 50
-    at 30 Hz and 48 kHz is 1 - |p| = pi 30 / (50 48000) = 3.9e-5, above 1/L = 2.1e-5 for a 1 s
-    block (2.1e-6 for 10 s); a 5 Hz coupling high-pass (|p| = 0.99935) stays below the DC
-    bound of a 20 Hz band edge (1 - 2.6e-5).
+    A pole whose time constant -1/ln|p| is longer than the block's L samples cannot be told
+    from the block's transient term (the x_delta columns): the data do not resolve it. Before
+    this bound (|p| <= 1 - 1e-9) spare poles ran to z = 1 or z = -1 out of the fitted band,
+    invisible in the sweeps' spectra but ringing in the simulated sweeps (random helmet 41, short
+    session: a pair at 23944 Hz and a real pole at z = -1 with large residues cancelling in band,
+    70000x the floor in simulation) and in a controller built on the model. Lightly damped
+    in-band modes stay reachable: Q 50 at 30 Hz and 48 kHz is 1 - |p| = pi 30 / (50 48000) =
+    3.9e-5, above 1/L = 2.1e-5 for a 1 s block (2.1e-6 for 10 s). A tighter bound out of the band
+    (the decay of a Q 50 mode at the pole's distance from it) put two random helmets above the floor
+    (thesis-length 13: 1.21x, short 1: 1.41x, both at the floor with 1/L alone) and is not used.
     """
-
-    length: int
-    low: float
-    high: float
-
-    @classmethod
-    def of(cls, data: "BlockData") -> "DecayBound":
-        angle = np.abs(np.angle(data.z))
-        return cls(data.length, float(angle.min()), float(angle.max()))
-
-    def decay(self, theta: np.ndarray) -> np.ndarray:
-        angle = np.abs(np.asarray(theta, dtype=float))
-        distance = np.maximum(np.maximum(self.low - angle, angle - self.high), 0.0)
-        return np.maximum(1.0 / self.length, distance / (2 * _OUT_OF_BAND_Q))
-
-    def slope(self, theta: np.ndarray) -> np.ndarray:
-        """d decay / d theta."""
-        theta = np.asarray(theta, dtype=float)
-        angle = np.abs(theta)
-        distance = np.maximum(self.low - angle, angle - self.high)
-        outside = distance / (2 * _OUT_OF_BAND_Q) > 1.0 / self.length
-        side = np.where(angle < self.low, -1.0, 1.0)
-        return np.where(outside, side * np.sign(theta) / (2 * _OUT_OF_BAND_Q), 0.0)
-
-
-def _decay(bound, theta) -> np.ndarray:
-    """The decay bound at the angles theta: ``bound`` a DecayBound, or one number for every angle."""
-    return bound.decay(theta) if isinstance(bound, DecayBound) else np.full(np.shape(theta), float(bound))
-
-
-def _slope(bound, theta) -> np.ndarray:
-    return bound.slope(theta) if isinstance(bound, DecayBound) else np.zeros(np.shape(theta))
+    return 1.0 / data.length
 
 
 def at_radius_bound(poles: np.ndarray, data: "BlockData") -> bool:
-    """Whether any of ``poles`` sits at the block's ``DecayBound`` (decay within 1 % of it): a pole
+    """Whether any of ``poles`` sits at the block's ``decay_bound`` (decay within 1 % of it): a pole
     the block could not hold, run out to the limit of the parametrisation."""
     poles = np.asarray(poles)
     if poles.size == 0:
         return False
     decay = -np.log(np.maximum(np.abs(poles), 1e-300))
-    return bool(np.any(decay <= (1 + _AT_BOUND) * DecayBound.of(data).decay(np.angle(poles))))
+    return bool(np.any(decay <= (1 + _AT_BOUND) * decay_bound(data)))
 
 
-def _real_scales(bound) -> tuple[float, float]:
-    """Largest |p| of a positive and of a negative real pole (angle 0 and pi)."""
-    return float(np.exp(-_decay(bound, 0.0))), float(np.exp(-_decay(bound, np.pi)))
-
-
-def _poles_to_params(poles: np.ndarray, bound=_STABLE) -> tuple[np.ndarray, int]:
+def _poles_to_params(poles: np.ndarray, margin: float = _STABLE) -> tuple[np.ndarray, int]:
     """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole) under the
-    decay bound ``bound`` (a DecayBound, or one decay rate for every angle, by default _STABLE); poles
-    beyond the bound start inside it."""
+    decay bound ``margin`` (-ln of the largest radius; ``decay_bound``); poles beyond it start inside it."""
     pairs = [p for p in poles if p.imag > 1e-12]
     reals = [p.real for p in poles if abs(p.imag) <= 1e-12]
     params = []
     for p in pairs:
         r = min(abs(p), 1 - 1e-12)
-        margin = float(_decay(bound, np.angle(p)))
         # A start at or beyond the bound begins a tenth of the bound's decay inside it, where sigma still moves it.
         params += [np.log(max(-np.log(r) - margin, 0.1 * margin)), np.angle(p)]
-    positive, negative = _real_scales(bound)
-    params += [np.arctanh(np.clip(p / (positive if p >= 0 else negative), -1 + 1e-12, 1 - 1e-12)) for p in reals]
+    params += [np.arctanh(np.clip(p / np.exp(-margin), -1 + 1e-12, 1 - 1e-12)) for p in reals]
     return np.array(params, dtype=float), len(pairs)
 
 
-def _params_to_poles(params: np.ndarray, pairs: int, bound=_STABLE) -> np.ndarray:
+def _params_to_poles(params: np.ndarray, pairs: int, margin: float = _STABLE) -> np.ndarray:
     sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    # The bound keeps |p| below 1, and below what the block resolves, however far sigma or xi run.
-    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _decay(bound, theta))
+    # The margin keeps |p| below 1, and within what the block resolves, however far sigma or xi run.
+    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - margin)
     upper = r * np.exp(1j * theta)
-    xi = params[2 * pairs:]
-    positive, negative = _real_scales(bound)
-    reals = np.where(xi >= 0, positive, negative) * np.tanh(xi)
-    return np.concatenate([upper, np.conj(upper), reals.astype(complex)])
+    return np.concatenate([upper, np.conj(upper), (np.exp(-margin) * np.tanh(params[2 * pairs:])).astype(complex)])
 
 
-def _pole_derivatives(params: np.ndarray, pairs: int, bound) -> np.ndarray:
-    """d pole / d parameter, one per parameter: -e^sigma p and (j - d decay/d theta) p for a pair's
-    (sigma, theta) (upper pole), scale (1 - tanh^2 xi) for a real pole's xi."""
+def _pole_derivatives(params: np.ndarray, pairs: int, margin: float) -> np.ndarray:
+    """d pole / d parameter, one per parameter: -e^sigma p and j p for a pair's (sigma, theta)
+    (upper pole), exp(-margin) (1 - tanh^2 xi) for a real pole's xi."""
     sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    upper = np.exp(-np.exp(np.minimum(sigma, 700.0)) - _decay(bound, theta)) * np.exp(1j * theta)
+    upper = np.exp(-np.exp(np.minimum(sigma, 700.0)) - margin) * np.exp(1j * theta)
     out = np.empty(params.size, dtype=complex)
     out[0:2 * pairs:2] = -np.exp(np.minimum(sigma, 700.0)) * upper
-    out[1:2 * pairs:2] = (1j - _slope(bound, theta)) * upper
-    xi = params[2 * pairs:]
-    positive, negative = _real_scales(bound)
-    out[2 * pairs:] = np.where(xi >= 0, positive, negative) * (1 - np.tanh(xi) ** 2)
+    out[1:2 * pairs:2] = 1j * upper
+    out[2 * pairs:] = np.exp(-margin) * (1 - np.tanh(params[2 * pairs:]) ** 2)
     return out
 
 
@@ -387,12 +335,12 @@ class _Projection:
     times their coefficients, in closed form: with g = 1/(z - p) and h = 1/(z - conj p) a
     pair's columns are (g + h)/2 and (g - h)/2j, a real pole's is g, and dg/dx = g^2 dp/dx.
     One QR per iteration instead of one least-squares solve per parameter.
-    ``margin`` is the block's ``DecayBound``.
+    ``margin`` is the block's ``decay_bound``.
     """
 
     def __init__(self, problem: _Problem, pairs: int, full: bool = True):
         self.problem, self.pairs, self._full = problem, pairs, full
-        self.margin = DecayBound.of(problem.data)
+        self.margin = decay_bound(problem.data)
         self._x = None
 
     def _solve(self, x):
@@ -492,7 +440,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     if np.max(np.abs(poles)) >= 1:
         raise IdentificationError("output-error refinement needs a stable starting model")
     problem = _Problem(data, delay, feedthrough, prefilter, input_noise_variance)
-    margin = DecayBound.of(data)
+    margin = decay_bound(data)
     params, pairs = _poles_to_params(poles, margin)
     projection = _Projection(problem, pairs)
 

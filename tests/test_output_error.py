@@ -65,14 +65,13 @@ def test_noise_tolerance_stops_early_at_the_same_cost_within_one_noise_variance(
 
 
 def test_jacobian_matches_central_differences_in_and_out_of_band(rng):
-    # The closed-form derivatives of the block bases, with the decay bound's slope out of band
-    # (pairs at 0.6 and 2.9 rad/sample lie outside the 20 Hz-5 kHz bins of a 48 kHz block).
+    # The closed-form derivatives of the block bases, in band and out of it (pairs at 1.5 and
+    # 2.9 rad/sample lie outside the 20 Hz-5 kHz bins of a 48 kHz block).
     data = block_data(_noise_recording(appendix_a_model("ff"), rng, seconds=0.5, output_noise=1e-3), max_seconds=None)
     upper = 0.99 * np.exp(1j * np.array([0.01, 0.6, 1.5, 2.9]))
     poles = np.concatenate([upper, np.conj(upper), [0.5, -0.3]])
     problem = output_error._Problem(data, 0, False)
-    bound = output_error.DecayBound.of(data)
-    x, pairs = output_error._poles_to_params(poles, bound)
+    x, pairs = output_error._poles_to_params(poles, output_error.decay_bound(data))
     projection = output_error._Projection(problem, pairs)
     jacobian = projection.jacobian(x)
     for k in range(x.size):
@@ -95,14 +94,14 @@ def test_spare_poles_stay_within_what_the_block_resolves(rng):
                               data, max_iterations=20)
     found = np.linalg.eigvals(fit.A)
     decay = -np.log(np.maximum(np.abs(found), 1e-300))
-    assert np.all(decay >= output_error.DecayBound.of(data).decay(np.angle(found)) * (1 - 1e-6))
+    assert np.all(decay >= output_error.decay_bound(data) * (1 - 1e-6))
     # With the bound at 1 - 1e-9 everywhere (before), a spare pair ran to |p| = 1 - 1e-9 at 13.4 kHz and two real
     # poles to z = 1 - 1e-9 on this block.
     assert np.max(np.abs(found)) < 1 - 1e-5
 
 
 def test_a_lightly_damped_bass_mode_stays_reachable(rng):
-    # Q 50 at 30 Hz and 48 kHz: 1 - |p| = 3.9e-5, above the in-band bound 1/L = 2.1e-5 of a 1 s block.
+    # Q 50 at 30 Hz and 48 kHz: 1 - |p| = 3.9e-5, above the bound 1/L = 2.1e-5 of a 1 s block.
     fs, omega = 48000.0, 2 * np.pi * 30.0 / 48000.0
     pole = np.exp(-omega / (2 * 50.0) + 1j * omega)
     A = lti.real_block_diagonal(np.array([pole, np.conj(pole), 0.6]))
