@@ -295,8 +295,10 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
             # or, at a bound, the estimator that removes the bias the bound's noise puts in the response.
             candidates = [f for f in candidates if f["effect"] in corrections or f["effect"] in bounds]
             if not candidates:
-                stop_reason = ("at the floor" if current.ratio <= AT_FLOOR else "at the bound the data set") + (
-                    f"; effects that cannot be modelled: {', '.join(unmodellable)}" if unmodellable else "")
+                where = ("at the floor" if current.ratio <= AT_FLOOR
+                         else f"at the bound that {' and '.join(sorted(bounds))} sets")
+                stop_reason = where + (f"; effects that cannot be modelled: {', '.join(unmodellable)}"
+                                       if unmodellable else "")
                 break
         candidates.sort(key=lambda f: f["effect"] not in corrections)
         specs = [(f, _auto_spec(f)) for f in candidates]

@@ -87,7 +87,8 @@ def input_noise_finding(ctx: DiagnosisContext) -> dict:
     bounds = bound >= BOUND_EXCESS and ctx.excess >= AT_FLOOR
     significant = biased or bounds
     limit = (f"; its noise passes through the path into every prediction, so no model validates below "
-             f"{bound:.1f}x the noise floor (now {ctx.excess:.1f}x): errors in variables" if bound >= BOUND_EXCESS else "")
+             f"{bound:.1f}x the noise floor (now {ctx.excess:.1f}x): errors in variables"
+             if bound >= BOUND_EXCESS else "")
     if biased:
         explanation = (f"the input channel carries its own noise ({np.sqrt(density * (VALIDATION_BAND[1] - VALIDATION_BAND[0])):.2e} "
                        f"FS in band, seen in the two sweeps' input difference): input SNR {snr_db:.1f} dB on the noise "
