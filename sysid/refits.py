@@ -22,8 +22,9 @@ Each builder ``add_X(model, noise, sweeps, params, options, transient_s)`` retur
   error on the raw DFT data (a resonance given without its gain).
 - ``add_order``: more order, as modes started at the bands worst against the noise
   floor and refined by output error, or as a fresh fit up to the higher order.
-- ``add_input_noise``: the errors-in-variables estimator: bias-compensated least
-  squares with the input noise density measured from the repeated sweeps.
+- ``add_input_noise``: the errors-in-variables estimator: the output-error fit on the ear
+  DFT divided by the H1 attenuation 1 - P_n / S_uu, P_n the input noise density measured
+  from the repeated sweeps.
 - ``add_dc_offset``, ``add_clock_drift``, ``add_clipping``: data corrections the model
   carries (``output_offset``, ``clock_ratio``, ``excluded``; ``sysid.corrections``), each
   the correction alone (``with_dc_offset``, ``with_clock_drift``, ``with_clipping``) and, for

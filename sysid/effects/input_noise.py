@@ -3,8 +3,10 @@
 Simulated as white noise on the input channel at an SNR (dB) inside the excitation's
 band; detected from the input noise the repeated sweeps show and H1 against H2
 (``sysid.findings.input_noise``); refined by the errors-in-variables estimator
-(``sysid.refits.add_input_noise``), kept unless the validation rms rises: the bias it
-removes is one the sweeps' own input noise hides from the rms.
+(``sysid.refits.add_input_noise``), kept unless the validation rms rises above both the
+model's before and the bound the input noise sets (``sysid.findings.input_noise.bound_ratio``):
+the bias it removes is one the sweeps' own input noise hides from the rms, and no model
+validates below that bound, which ``refine --auto`` names when it stops there.
 """
 
 from __future__ import annotations
