@@ -80,6 +80,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lti
+from .compare import fit_sinusoids
+# The line search of the periodic-disturbance detector: one definition of "a line the input lacks".
+from .findings.disturbance import find_lines
 from .output_error import block_data, linear_cost, refine_output_error
 from .recordings import Recording
 from .spectra import Spectra
@@ -190,9 +193,6 @@ def without_lines(noise: Recording, band: tuple[float, float], A=None, seconds: 
     40 / (2 M) of V spans costs that differ by twice the whole noise, and a delay 4 samples past
     the answer was read as within it.
     """
-    from .compare import fit_sinusoids
-    from .findings.disturbance import find_lines
-
     left = noise.y
     if A is not None:
         n = A.shape[0]
