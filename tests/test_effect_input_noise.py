@@ -3,7 +3,7 @@
 import pytest
 
 from sysid.compare import compare
-from sysid.findings.input_noise import bound_ratio, input_noise_density, input_noise_finding
+from sysid.findings.input_noise import bound_ratio, bound_share, input_noise_density, input_noise_finding
 from sysid.model import Model
 
 from effect_units import true_context, true_session
@@ -40,3 +40,18 @@ def test_the_bound_is_what_the_true_path_validates_at():
 def test_no_bound_without_input_noise():
     found = input_noise_finding(true_context("ff", 5, ()))
     assert found["params"]["bound_ratio"] < 1.1 and not found["evidence"]["bounds_the_error"]
+
+
+def test_a_model_far_above_the_floor_for_another_effect_is_not_bounded_by_the_input_noise():
+    # Every input channel has some noise (the sessions' converter noise leaves the true path near
+    # 1.1x): with a resonance missing the error is far above that, and input noise is not what bounds it.
+    context = true_context("fb", 5, ("resonance:f0_hz=1400,q=8,gain_db=12",))
+    found = input_noise_finding(context)
+    assert context.excess > 5.0
+    assert not found["significant"] and not found["evidence"]["bounds_the_error"], found["explanation"]
+
+
+def test_the_bound_share_is_the_error_power_above_the_floor_it_accounts_for():
+    assert bound_share(1.5, 1.2) == 1.0
+    assert bound_share(2.0, 4.0) == pytest.approx(3.0 / 15.0)
+    assert bound_share(1.1, 73.0) < 1e-3
