@@ -44,7 +44,7 @@ from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
 from .thresholds import IDENTIFICATION_BAND, TRANSIENT_S
 from .uncertainty import frequency_response_band
-from .validation import VALIDATION_BAND, check_repeats, noise_floor, simulated_rms, sweep_spectrum
+from .validation import VALIDATION_BAND, check_repeats, noise_floor, repeat_lag, simulated_rms, sweep_spectrum
 
 __all__ = ["IdentificationOptions", "Identification", "identify"]
 
@@ -94,13 +94,16 @@ class Identification:
     latency: LatencyEstimate | None = None
 
 
-def _check_inputs(noise: Recording, sweeps: list[Recording], options: IdentificationOptions) -> None:
+def _check_inputs(noise: Recording, sweeps: list[Recording], options: IdentificationOptions) -> int:
+    """Checks the inputs; returns the lag (samples) aligning the second sweep to the first."""
     if options.estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator must be one of {', '.join(ESTIMATORS)}; found {options.estimator!r}")
     if len(sweeps) != 2:
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
-    check_repeats(*sweeps)
+    lag = repeat_lag(*sweeps)
+    check_repeats(*sweeps, lag=lag)
+    return lag
 
 
 def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: str = "fb",
@@ -120,13 +123,13 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     options = options or IdentificationOptions()
     if path not in PATHS:
         raise IdentificationError(f"path must be one of {', '.join(PATHS)}; found {path!r}")
-    _check_inputs(noise, sweeps, options)
+    lag = _check_inputs(noise, sweeps, options)
     fs = noise.fs
     seconds: dict[str, float] = {}
 
     t0 = time.perf_counter()
     body = noise.trimmed(options.transient_s)
-    floor = noise_floor(sweeps[0], sweeps[1], options.validation_band)
+    floor = noise_floor(sweeps[0], sweeps[1], options.validation_band, lag=lag)
     latency = None
     delay = 0
     if options.latency:

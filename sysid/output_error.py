@@ -34,6 +34,7 @@ from . import lti
 from .errors import IdentificationError
 from .recordings import Recording
 from .thresholds import IDENTIFICATION_BAND
+from .validation import rfft_pair
 
 # BLAS libraries found once at import (numpy's and scipy's are loaded by then); limiting
 # through it costs microseconds, threadpool_limits() rescans the process's libraries (4 ms).
@@ -63,7 +64,8 @@ def block_data(noise: Recording, band=IDENTIFICATION_BAND, max_seconds: float | 
     inside = (f >= band[0]) & (f <= band[1])
     u = noise.u[:n] - noise.u[:n].mean()
     y = noise.y[:n] - noise.y[:n].mean()
-    return BlockData(np.exp(2j * np.pi * f[inside] / noise.fs), np.fft.rfft(u)[inside], np.fft.rfft(y)[inside], n, noise.fs)
+    U, Y = rfft_pair(u, y)
+    return BlockData(np.exp(2j * np.pi * f[inside] / noise.fs), U[inside], Y[inside], n, noise.fs)
 
 
 def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray:
