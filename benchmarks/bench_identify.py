@@ -165,7 +165,7 @@ def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: i
         cpu = np.array([r[label]["cpu"] for r in rows])
         ok = int(np.sum((rms <= 1.2) & (frf <= 0.05)))
         all_three = int(np.sum((rms <= 1.2) & (frf <= 0.05) & (np.abs(dd) <= 2)))
-        print(f"| {name} | {ok}/{len(rows)} | {all_three}/{len(rows)} | {np.median(rms):.2f} / {rms.max():.1f} | "
+        print(f"| {name} | {ok}/{len(rows)} | {all_three}/{len(rows)} | {np.median(rms):.2f} / {rms.max():.2f} | "
               f"{np.median(frf):.3f} / {frf.max():.3f} | "
               f"{np.median(dn):+.0f} ({dn.min():+d}..{dn.max():+d}) | {dd.min():+d}..{dd.max():+d} | "
               f"{np.median(wall):.1f} / {wall.max():.1f} | {np.median(cpu):.1f} / {cpu.max():.1f} |")
