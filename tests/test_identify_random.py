@@ -29,11 +29,12 @@ SLOW_SEEDS = range(100)
 # lightly damped mode below 60 Hz or near 150 Hz missed, found by sysid.order_search's mode
 # insertion), or whose pick rang in simulation through an out-of-band pole at z = -1 (63, 13x:
 # dropped by identify's settling). 12-22 s of CPU each, so slow-marked.
-# Seed 1 reaches 1.11x with an FRF error of 0.008, but its model keeps a real pole at z = -1 at the
-# parametrisation's margin, and balancing leaves an entry of 196 (the test asks <= 10).
-LOCAL_MINIMUM_SEEDS = (pytest.param(1, marks=pytest.mark.xfail(strict=True, reason="a balanced entry of 196: a pole at "
-                                                                                    "z = -1 left at the margin")),
-                       25, 27, 63, 72)
+# Seed 1 kept a real pole at z = -1 at the parametrisation's old margin (1 - 1e-9), which balancing
+# left as an entry of 196; the pole radius is now bounded by the block's time constant
+# (sysid.output_error.decay_bound) and it passes.
+# Seed 93 plateaued at orders 10-15 at 147x the floor, where six orders without gain ended the
+# scan (now only within twice the floor); order 16 then drops to 53x and the model reaches the floor.
+LOCAL_MINIMUM_SEEDS = (1, 25, 27, 63, 72, 93)
 
 
 def _failure(seed: int) -> str | None:
@@ -48,9 +49,12 @@ def _failure(seed: int) -> str | None:
     frf_error = np.max(np.abs(model.frequency_response(f) - h_true)) / np.max(np.abs(h_true))
     assert model.stable
     assert model.identification["latency"]["samples"] == model.delay == model.identification["delay"]
-    # Balanced: every entry of order one (a modal form held up to 1e12 in B).
-    assert max(np.abs(model.A).max(), np.abs(model.B).max(), np.abs(model.C).max()) <= 10.0
     problems = []
+    # Balanced: every entry of order one (a modal form held up to 1e12 in B). Counted as a miss
+    # beside the others, so that the hundred-helmet count holds every seed.
+    entry = max(np.abs(model.A).max(), np.abs(model.B).max(), np.abs(model.C).max())
+    if entry > 10.0:
+        problems.append(f"balanced entry {entry:.3g}")
     if abs(model.delay - rp.delay) > 2:
         problems.append(f"delay {model.delay}, true {rp.delay}")
     if model.identification["rms"] > 1.2 * true_floor:
@@ -74,10 +78,6 @@ def test_random_helmet_out_of_a_local_minimum_reaches_the_floor(seed):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="94 of seeds 0-99 pass at 2d003e7 with this grid of widths: 41 (10.45x), 57 (delay "
-                                       "+6), 77 (delay -3) miss the criteria, and 14, 51, 94 meet them with a balanced "
-                                       "entry above 10 (7.4e3 on 14, whose poles lie within |p| <= 0.9974: cause not yet found); the "
-                                       "benchmark's grid gives 97 (BENCHMARKS.md, random helmets); issue 10 asks for 95")
 def test_hundred_random_helmets_at_least_95_percent_reach_the_floor():
     failures = [f for f in map(_failure, SLOW_SEEDS) if f is not None]
     assert len(failures) <= 5, "; ".join(failures)
