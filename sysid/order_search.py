@@ -33,7 +33,7 @@ import numpy as np
 from . import lti
 from .output_error import BlockData, added_pole_costs, linear_cost, refine_output_error, residual_spectrum
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
-from .thresholds import AT_FLOOR, UNDER_MODELLED_EXCESS
+from .thresholds import AT_FLOOR
 from .validation import SweepSpectrum, band_energy, rms_from_responses
 
 __all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
@@ -178,8 +178,7 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
     ``grid_gammas`` maps an order to the seed grid's best gamma for it. Orders are tried
     in ascending order; the search ends early once a model validates within ``at_floor``
     times the noise floor ``floor`` (FS), when ``patience`` successive orders have not
-    lowered the best rms by 1 % while it is within ``UNDER_MODELLED_EXCESS`` times the floor
-    (a plateau of several orders, not the first stall; farther above, every order is tried), or
+    lowered the best rms by 1 % (a plateau of several orders, not the first stall), or
     when ``near_patience`` orders have not lowered it once it is within ``near_floor``
     times the floor or its residual on the block is at the block's noise level
     (``block_at_noise``).
@@ -233,10 +232,7 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
         # above the floor: the bass the sweeps weigh heavily holds few bins of a short block).
         near = since >= near_patience and (record <= near_floor * floor or block_at_noise(
             min(best.values(), key=lambda c: c.rms).A, block, sweeps, floor, feedthrough))
-        # Far above the floor a plateau is a run of local minima, not the data's order: the scan goes
-        # on (random helmet 93, short: orders 10-15 at 147x, order 16 at 53x, then the floor).
-        plateau = since >= patience and record <= UNDER_MODELLED_EXCESS * floor
-        if best[n].rms <= at_floor * floor or plateau or near:
+        if best[n].rms <= at_floor * floor or since >= patience or near:
             if progress and k + 1 < len(orders):
                 progress(len(orders), len(orders), "order search")
             break
