@@ -103,7 +103,9 @@ def pole_residue_response(poles: np.ndarray, residues: np.ndarray, d, z: np.ndar
     z = np.asarray(z, dtype=complex).reshape(-1)
     lead = poles.shape[:-1]
     n = poles.shape[-1]
-    poles, residues = poles.reshape(-1, n), residues.reshape(-1, n)
+    # The models' count from the leading axes (reshape(-1, 0) cannot infer it for a static gain, n = 0).
+    models = int(np.prod(lead, dtype=int))
+    poles, residues = poles.reshape(models, n), residues.reshape(models, n)
     out = np.empty((poles.shape[0], z.size), dtype=complex)
     for k in range(poles.shape[0]):
         for start in range(0, z.size, _RESPONSE_CHUNK):

@@ -56,3 +56,13 @@ def test_unstable_system_is_only_equalised():
     A = np.array([[1.2]])
     Ab, Bb, Cb, _ = lti.balanced_realisation(A, [[100.0]], [[1.0]], 0.0)
     assert Ab[0, 0] == 1.2 and Bb[0, 0] == pytest.approx(10.0) and Cb[0, 0] == pytest.approx(10.0)
+
+
+def test_a_static_gain_has_its_gain_at_every_frequency():
+    # No states: the response is D alone (a model may be a pure gain, e.g. a feed-forward path's
+    # model before any dynamics are added); one model and several along a leading axis.
+    z = np.exp(1j * np.linspace(0.0, np.pi, 7))
+    assert np.array_equal(lti.frequency_response(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[0.5]], z),
+                          np.full(7, 0.5 + 0j))
+    several = lti.pole_residue_response(np.zeros((3, 0)), np.zeros((3, 0)), np.array([1.0, 2.0, 3.0]), z)
+    assert np.array_equal(several, np.repeat([[1.0], [2.0], [3.0]], 7, axis=1).astype(complex))
