@@ -152,6 +152,11 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     lag = repeat_lag(*sweeps)
     check_repeats(*sweeps, lag=lag)
     first = int(round(SKIP_S * fs))
+    for sweep in sweeps:
+        # Validation skips each sweep's first SKIP_S (the model starts from rest): nothing may be left.
+        if sweep.y.size < first + 2:
+            raise IdentificationError(f"{sweep.path}: a sweep of {sweep.y.size} samples leaves nothing to validate "
+                                      f"after its first {SKIP_S * 1000:g} ms; give the whole recorded sweep")
     per_sweep = []
     cleaned = []
     kept = []

@@ -86,6 +86,9 @@ def model_file(tmp_path_factory):
 # One 8-bit frame at 1 Hz: its DC-offset warnings once came before the sample-rate error.
 @example(blob=b"RIFF&\x00\x00\x00WAVEfmt \x10\x00\x00\x00\x01\x00\x02\x00\x01\x00\x00\x00\x02\x00\x00\x00"
               b"\x02\x00\x08\x00data\x02\x00\x00\x00\x00\x00")
+# One 8-bit frame at 44.1 kHz: a sweep shorter than the start validation skips left nothing to validate.
+@example(blob=b"RIFF&\x00\x00\x00WAVEfmt \x10\x00\x00\x00\x01\x00\x02\x00D\xac\x00\x00\x88X\x01\x00"
+              b"\x02\x00\x08\x00data\x02\x00\x00\x00\x00\x00")
 def test_compare_on_fuzzed_wav_files(blob, session_files, model_file, tmp_path, capsys):
     _run_compare(blob, session_files, model_file, tmp_path, capsys)
 
