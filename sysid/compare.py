@@ -31,7 +31,8 @@ import numpy as np
 from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
 from .recordings import Recording, check_same_rate
-from .validation import SKIP_S, VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag
+from .validation import (VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag,
+                         validation_start)
 
 __all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "fit_sinusoids", "LAGS", "BOUND_99"]
 
@@ -151,12 +152,8 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     # The repeats' alignment depends on their inputs only: found once for both uses.
     lag = repeat_lag(*sweeps)
     check_repeats(*sweeps, lag=lag)
-    first = int(round(SKIP_S * fs))
-    for sweep in sweeps:
-        # Validation skips each sweep's first SKIP_S (the model starts from rest): nothing may be left.
-        if sweep.y.size < first + 2:
-            raise IdentificationError(f"{sweep.path}: a sweep of {sweep.y.size} samples leaves nothing to validate "
-                                      f"after its first {SKIP_S * 1000:g} ms; give the whole recorded sweep")
+    # One rate (checked above), so one start; each sweep must reach past it.
+    first = max(validation_start(sweep) for sweep in sweeps)
     per_sweep = []
     cleaned = []
     kept = []

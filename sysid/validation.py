@@ -27,7 +27,8 @@ from .errors import IdentificationError
 from .recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
-           "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "SKIP_S", "VALIDATION_BAND"]
+           "noise_floor", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "validation_start",
+           "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
 # Above this largest prime factor of a length numpy's DFT is slow (long generic passes or Bluestein's
@@ -75,11 +76,19 @@ def rfft_pair(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (half + mirrored) / 2, (half - mirrored) / 2j
 
 
-def sweep_spectrum(sweep: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S) -> SweepSpectrum:
+def validation_start(sweep: Recording, skip_s: float = SKIP_S) -> int:
+    """Index of a sweep's first validated sample: validation skips its first ``skip_s`` (the model
+    starts from rest). IdentificationError when fewer than two samples are left after it."""
     first = int(round(skip_s * sweep.fs))
+    if sweep.y.size < first + 2:
+        raise IdentificationError(f"{sweep.path}: a sweep of {sweep.y.size} samples leaves nothing to validate "
+                                  f"after its first {skip_s * 1000:g} ms; give the whole recorded sweep")
+    return first
+
+
+def sweep_spectrum(sweep: Recording, band=VALIDATION_BAND, skip_s: float = SKIP_S) -> SweepSpectrum:
+    first = validation_start(sweep, skip_s)
     u, y = sweep.u[first:], sweep.y[first:]
-    if u.size < 2:
-        raise IdentificationError(f"{sweep.path}: too short for validation")
     f = np.fft.rfftfreq(u.size, 1 / sweep.fs)
     inside = (f >= band[0]) & (f <= band[1])
     U, Y = rfft_pair(u, y)
