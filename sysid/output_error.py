@@ -149,10 +149,9 @@ def _params_to_poles(params: np.ndarray, pairs: int, margin: float = _STABLE) ->
 def _pole_derivatives(params: np.ndarray, pairs: int, margin: float) -> np.ndarray:
     """d pole / d parameter, one per parameter: -e^sigma p and j p for a pair's (sigma, theta)
     (upper pole), exp(-margin) (1 - tanh^2 xi) for a real pole's xi."""
-    sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    upper = np.exp(-np.exp(np.minimum(sigma, 700.0)) - margin) * np.exp(1j * theta)
+    upper = _params_to_poles(params, pairs, margin)[:pairs]
     out = np.empty(params.size, dtype=complex)
-    out[0:2 * pairs:2] = -np.exp(np.minimum(sigma, 700.0)) * upper
+    out[0:2 * pairs:2] = -np.exp(np.minimum(params[0:2 * pairs:2], 700.0)) * upper
     out[1:2 * pairs:2] = 1j * upper
     out[2 * pairs:] = np.exp(-margin) * (1 - np.tanh(params[2 * pairs:]) ** 2)
     return out
@@ -264,13 +263,11 @@ def _qr_solve(matrix: np.ndarray, rhs: np.ndarray) -> tuple[_Factor, np.ndarray]
 
 
 class _Problem:
-    def __init__(self, data: BlockData, delay: int, feedthrough: bool, prefilter: np.ndarray | None = None,
-                 input_noise_variance: float | np.ndarray | None = None):
+    def __init__(self, data: BlockData, delay: int, feedthrough: bool, prefilter: np.ndarray | None = None):
         self.data, self.feedthrough = data, feedthrough
         self.u_delayed = data.U * data.z ** (-delay)
         self.weight = np.ones(data.z.size) if prefilter is None else np.asarray(prefilter, dtype=complex)
         self.u_delayed = self.u_delayed * self.weight
-        self.input_noise_variance = input_noise_variance
 
     def regression(self, poles):
         """(A, C, regressor, scales, rhs) for the poles: the modal (A, C), the [Re; Im] regressor of the
@@ -286,35 +283,6 @@ class _Problem:
         A, C, real, scale, rhs = self.regression(poles)
         scaled = _qr_solve(real, rhs)[1]
         return A, C, scaled / scale, rhs - real @ scaled
-
-    def bias_compensated(self, poles):
-        """Linear parameters by bias-compensated least squares (errors in variables).
-
-        With input DFT noise N_k of variance s_k = E|N_k|^2 the normal matrix of the
-        input columns phi_k U_k is inflated by sum_k s_k |w_k|^2 phi_k^H phi_k, which
-        biases the gain low by 1/(1 + S_nn/S_uu) (effects.md, input-noise). Subtracting
-        that expectation (Stoica & Soderstrom's bias-eliminating least squares) removes
-        the bias; the poles are kept from the ordinary fit.
-        """
-        A = lti.real_block_diagonal(poles)
-        C = lti.block_output_row(A)
-        basis = modal_basis(A, C, self.data.z)
-        inputs = [basis]
-        if self.feedthrough:
-            inputs.append(np.ones((self.data.z.size, 1)))
-        phi = np.hstack(inputs)
-        regressor = np.hstack([phi * self.u_delayed[:, None], basis * self.data.z[:, None]])
-        real = np.vstack([regressor.real, regressor.imag])
-        rhs = np.concatenate([self.data.Y.real, self.data.Y.imag])
-        normal = real.T @ real
-        variance = np.broadcast_to(np.asarray(self.input_noise_variance, dtype=float), self.data.z.shape)
-        weighted = phi * np.sqrt(variance * np.abs(self.weight) ** 2)[:, None]
-        m = phi.shape[1]
-        normal[:m, :m] -= (weighted.conj().T @ weighted).real
-        theta = np.linalg.solve(normal, real.T @ rhs)
-        # Keep the column order of ``linear``: input columns of the modes, transient, then D.
-        order = list(range(basis.shape[1])) + list(range(m, m + basis.shape[1])) + list(range(basis.shape[1], m))
-        return A, C, theta[order], rhs - real @ theta
 
 
 def _block_basis(pole: complex, z: np.ndarray) -> np.ndarray:
@@ -418,7 +386,6 @@ class _Projection:
 
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
                         max_iterations: int = 60, prefilter: np.ndarray | None = None,
-                        input_noise_variance: float | np.ndarray | None = None,
                         noise_tolerance: bool = False) -> OutputErrorFit:
     """Refine a stable model's poles and zeros on raw DFT data; see the module docstring.
 
@@ -433,15 +400,14 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
 
     ``prefilter`` (complex response at the data's bins) is a fixed factor F in series
     in front of the fitted system: the fit is of Y = G F z^-d U, and the returned
-    (A, B, C, D) is G alone. ``input_noise_variance`` (E|N_k|^2 of the input DFT, per
-    bin or one value) switches the final linear step to bias-compensated least squares.
+    (A, B, C, D) is G alone.
     """
     poles = np.linalg.eigvals(np.asarray(A, dtype=float))
     if poles.size == 0:
         raise IdentificationError("output-error refinement needs a model of order at least 1")
     if np.max(np.abs(poles)) >= 1:
         raise IdentificationError("output-error refinement needs a stable starting model")
-    problem = _Problem(data, delay, feedthrough, prefilter, input_noise_variance)
+    problem = _Problem(data, delay, feedthrough, prefilter)
     margin = decay_bound(data)
     params, pairs = _poles_to_params(poles, margin)
     projection = _Projection(problem, pairs)
@@ -456,9 +422,8 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     # result is not stable and the starting poles are kept instead.
     stable = np.all(np.abs(_params_to_poles(result.x, pairs, margin)) < 1.0)
     x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
-    solve = problem.linear if input_noise_variance is None else problem.bias_compensated
     with _BLAS.limit(limits=1, user_api="blas"):
-        A_new, C_new, theta, final = solve(_params_to_poles(x, pairs, margin))
+        A_new, C_new, theta, final = problem.linear(_params_to_poles(x, pairs, margin))
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
     D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])
