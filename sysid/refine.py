@@ -277,11 +277,12 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     while len(steps) < max_steps:
         if diagnosis is None:
             diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
-        bound, bounding = _error_bound(diagnosis)
+        found = bounding_findings(diagnosis)
+        bound, bounding = _error_bound(found)
         # At the floor, or at the bound an effect sets that no model gets below (the input noise).
         at_floor = current.ratio <= AT_FLOOR * bound
         auto_effects, corrections = _auto_effects(), _corrections()
-        bounds = {f.effect for f in bounding_findings(diagnosis)}
+        bounds = {f.effect for f in found}
         unmodellable = bounding + [f["effect"] for f in diagnosis.significant
                                    if f["effect"] not in auto_effects and f["effect"] not in bounds]
         accepted = sum(1 for step in steps if step.accepted)
@@ -367,9 +368,9 @@ def bounding_findings(diagnosis) -> list:
     return [f for f in diagnosis.significant if f.evidence.get("bounds_the_error")]
 
 
-def _error_bound(diagnosis) -> tuple[float, list[str]]:
-    """(the largest bound over the floor among ``bounding_findings``, 1 if none; each named with its bound)."""
-    found = bounding_findings(diagnosis)
+def _error_bound(found: list) -> tuple[float, list[str]]:
+    """(the largest bound over the floor among ``found``, the ``bounding_findings``, 1 if none; each named
+    with its bound)."""
     named = []
     for f in found:
         snr = f.params.get("input_snr_db")

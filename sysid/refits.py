@@ -463,6 +463,14 @@ def add_clipping(model, noise, sweeps, params, options, transient_s):
     return correct_data(model, noise, sweeps, [(with_clipping, params)], options, transient_s)
 
 
+# Order of the residual's AR model that whitens the clock ratio's regression (``clock_residual``).
+CLOCK_AR_ORDER = 32
+CLOCK_AR_FLOOR = 0.01
+
+# Passes of the clock ratio's refinement after a clock correction's refit (``clock_residual``).
+CLOCK_PASSES = 2
+
+
 def clock_residual(model: Model, noise: Recording, transient_s: float) -> float:
     """The relative error delta of the model's clock ratio, read from its residual on the noise recording.
 
@@ -496,15 +504,6 @@ def clock_residual(model: Model, noise: Recording, transient_s: float) -> float:
     X, e = scipy.signal.lfilter(whiten, 1.0, X, axis=0), scipy.signal.lfilter(whiten, 1.0, e)
     coef, *_ = np.linalg.lstsq(X, e, rcond=None)
     return float(-coef[1])
-
-
-# Order of the residual's AR model that whitens the clock ratio's regression (``clock_residual``).
-CLOCK_AR_ORDER = 32
-CLOCK_AR_FLOOR = 0.01
-
-
-# Passes of the clock ratio's refinement after a clock correction's refit (``clock_residual``).
-CLOCK_PASSES = 2
 
 
 def refined_clock(best: Model, noise, sweeps, options, transient_s) -> Model:

@@ -57,7 +57,11 @@ def input_noise_error(model, density: float, band=VALIDATION_BAND) -> float:
 def bound_ratio(model, sweeps: list[Recording], noise_floor: float) -> float:
     """The validation rms over the floor that the input channel's noise leaves even for the true path:
     sqrt(floor^2 + e_n^2) / floor, e_n = ``input_noise_error`` (the model stands in for the path)."""
-    error = input_noise_error(model, input_noise_density(sweeps))
+    return _over_floor(input_noise_error(model, input_noise_density(sweeps)), noise_floor)
+
+
+def _over_floor(error: float, noise_floor: float) -> float:
+    """sqrt(floor^2 + error^2) / floor: the floor with the input noise's error added, over the floor."""
     return float(np.hypot(noise_floor, error) / noise_floor) if noise_floor > 0 else float("inf")
 
 
@@ -90,8 +94,7 @@ def input_noise_finding(ctx: DiagnosisContext) -> dict:
     median_bias = float(np.median(bias))
     snr_db = float(10 * np.log10(np.median(snr)))
     error = input_noise_error(ctx.model, density)
-    floor = ctx.comparison.noise_floor
-    bound = float(np.hypot(floor, error) / floor) if floor > 0 else float("inf")
+    bound = _over_floor(error, ctx.comparison.noise_floor)
     compensated = str(ctx.model.identification.get("estimator", "")).startswith("bias-compensated")
     biased = median_bias >= BIAS_DB and not compensated
     # The bound explains an error above the floor that no refinement removes: named while it does,
