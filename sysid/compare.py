@@ -30,6 +30,8 @@ import numpy as np
 
 from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
+# One line fit for the whole package (sysid.lines); named here too, where the disturbance model is applied.
+from .lines import fit_sinusoids
 from .recordings import Recording, check_same_rate
 from .validation import (VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag,
                          validation_start)
@@ -48,31 +50,6 @@ def third_octave_bands(low: float = 20.0, high: float = 5000.0) -> list[tuple[fl
         if low / 1.05 <= center <= high * 1.05:
             bands.append((center, center * 10.0 ** (-0.05), center * 10.0 ** 0.05))
     return bands
-
-
-def fit_sinusoids(x: np.ndarray, frequencies, fs: float) -> np.ndarray:
-    """Least-squares fit of sinusoids at the given frequencies (Hz) to x; returns the fitted signal.
-
-    Each line gets cos/sin columns and the same multiplied by centred time, so a
-    small frequency error or a slow amplitude change of the line is absorbed too.
-    """
-    frequencies = list(frequencies or [])
-    if not frequencies or x.size < 8:
-        return np.zeros_like(x)
-    t = (np.arange(x.size) - x.size / 2) / fs
-    span = t[-1] - t[0]
-    regressor = np.empty((x.size, 4 * len(frequencies)), order="F")  # column by column
-    for k, f in enumerate(frequencies):
-        phase = 2 * np.pi * f * t
-        regressor[:, 4 * k] = np.cos(phase)
-        regressor[:, 4 * k + 1] = np.sin(phase)
-        regressor[:, 4 * k + 2] = regressor[:, 4 * k] * (t / span)
-        regressor[:, 4 * k + 3] = regressor[:, 4 * k + 1] * (t / span)
-    # Normal equations: the columns are near orthogonal over a recording of many periods, so the
-    # small Gram matrix is well conditioned, and forming it costs a fraction of a QR/SVD of the
-    # tall regressor (lstsq on the Gram matrix still copes with coinciding lines).
-    theta, *_ = np.linalg.lstsq(regressor.T @ regressor, regressor.T @ x, rcond=None)
-    return regressor @ theta
 
 
 @dataclass

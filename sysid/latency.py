@@ -80,9 +80,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lti
-from .compare import fit_sinusoids
-# The line search of the periodic-disturbance detector: one definition of "a line the input lacks".
-from .findings.disturbance import find_lines
+from .lines import find_lines, fit_sinusoids
 from .output_error import block_data, linear_cost, refine_output_error
 from .recordings import Recording
 from .spectra import Spectra
@@ -182,7 +180,7 @@ def compensate_delay(recording: Recording, samples: int) -> Recording:
 def without_lines(noise: Recording, band: tuple[float, float], A=None, seconds: float = 1.0,
                   feedthrough: bool = False) -> Recording:
     """``noise`` with the ear signal's spectral lines that the input lacks fitted and taken out
-    (``findings.disturbance.find_lines``, ``compare.fit_sinusoids``): the recording itself when it
+    (``lines.find_lines``, ``lines.fit_sinusoids``): the recording itself when it
     has none. With a core's poles eig(A) (fitted on ``noise``), the lines are looked for in what the
     core leaves of the ear signal (its linear step on the first ``seconds``, simulated on the whole
     recording), where the plant's response to the input no longer hides them.

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from sysid.findings.disturbance import disturbance_finding, find_lines
+from sysid.findings.disturbance import disturbance_finding
+from sysid.lines import find_lines
 
 from effect_units import true_context
 

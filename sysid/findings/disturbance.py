@@ -1,66 +1,21 @@
 """Periodic disturbance: spectral lines in the residual that are not in the input (effects.md).
 
-The model's residual on the noise recording (after the transient) is Hann-windowed
-and transformed in one piece; a line is a bin more than ``LINE_RATIO`` times the
-median of its neighbourhood (for noise the periodogram is exponentially
-distributed, so chance exceedances are of order exp(-LINE_RATIO ln 2)) while the
-input spectrum has no line there. Frequencies are refined by parabolic
-interpolation of the log spectrum around the peak (for a Hann window the bias is
-below a tenth of a bin), and each line must also be present in both sweep residuals.
+The lines of the model's residual on the noise recording (after the transient) that the
+input lacks (``sysid.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
+neighbourhood), each of which must also be present in both sweep residuals.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.ndimage
 
-from ..compare import fit_sinusoids
+from ..lines import LINE_RATIO, find_lines, fit_sinusoids
 from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction
 from .dynamics import factor_residual, has_series_factor, within_resonance
 
-__all__ = ["disturbance_finding", "find_lines"]
-
-LINE_RATIO = 40.0
-MAX_LINES = 12
-NEIGHBOURHOOD_HZ = 20.0
-
-
-def find_lines(x: np.ndarray, u: np.ndarray, fs: float, band=IDENTIFICATION_BAND, known=()) -> list[tuple[float, float, float]]:
-    """(frequency Hz, ratio to neighbourhood, RMS level FS) of the lines of x that u lacks."""
-    n = x.size
-    window = np.hanning(n)
-    f = np.fft.rfftfreq(n, 1 / fs)
-    width = max(9, int(NEIGHBOURHOOD_HZ * n / fs) | 1)
-    # Only the band and half a neighbourhood around it: the median filter is the costly step.
-    lo = max(int(np.searchsorted(f, band[0])) - width, 1)
-    hi = min(int(np.searchsorted(f, band[1])) + width, f.size - 1)
-    X = np.zeros(f.size)
-    X[lo - 1:hi + 1] = (np.abs(np.fft.rfft((x - x.mean()) * window)) ** 2)[lo - 1:hi + 1]
-    Uu = (np.abs(np.fft.rfft((u - u.mean()) * window)) ** 2)[lo:hi]
-    background = scipy.ndimage.median_filter(X[lo:hi], size=width, mode="nearest")
-    background_u = scipy.ndimage.median_filter(Uu, size=width, mode="nearest")
-    ratio = np.zeros(f.size)
-    ratio_u = np.zeros(f.size)
-    ratio[lo:hi] = X[lo:hi] / np.maximum(background, 1e-300)
-    ratio_u[lo:hi] = Uu / np.maximum(background_u, 1e-300)
-    inside = (f >= band[0]) & (f <= band[1])
-    peaks = np.where(inside[1:-1] & (ratio[1:-1] > LINE_RATIO) & (X[1:-1] >= X[:-2]) & (X[1:-1] >= X[2:])
-                     & (ratio_u[1:-1] < LINE_RATIO / 4))[0] + 1
-    peaks = peaks[np.argsort(ratio[peaks])[::-1]][:MAX_LINES]
-    lines = []
-    for k in peaks:
-        a, b, c = np.log(X[k - 1:k + 2] + 1e-300)
-        offset = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
-        frequency = (k + float(np.clip(offset, -0.5, 0.5))) * fs / n
-        if any(abs(frequency - g) < 2 * fs / n for g in known):
-            continue
-        # The level from 2 s of the recording: plenty for a line this far above the noise.
-        excerpt = x[: int(2 * fs)] - x.mean()
-        fitted = fit_sinusoids(excerpt, [frequency], fs)
-        lines.append((frequency, float(ratio[k]), float(np.sqrt(np.mean(fitted**2)))))
-    return sorted(lines)
+__all__ = ["disturbance_finding"]
 
 
 def _in_sweep(residual: np.ndarray, frequency: float, fs: float) -> bool:
@@ -78,7 +33,8 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     prediction = noise_prediction(ctx)
     residual = factor_residual(ctx, ctx.noise.y - prediction, prediction)[body_start:]
     u = ctx.noise.u[body_start:]
-    candidates = [line for line in find_lines(residual, u, ctx.fs, known=model.disturbance_frequencies or ())
+    candidates = [line for line in find_lines(residual, u, ctx.fs, IDENTIFICATION_BAND,
+                                              known=model.disturbance_frequencies or ())
                   if not within_resonance(ctx, line[0])]
     first = int(round(SKIP_S * ctx.fs))
     sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
