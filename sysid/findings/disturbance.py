@@ -2,14 +2,16 @@
 
 The lines of the model's residual on the noise recording (after the transient) that the
 input lacks (``sysid.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
-neighbourhood), each of which must also be present in both sweep residuals.
+neighbourhood) and does not explain (``sysid.lines.driven``: a mode the model lacks peaks in
+the residual too, coherent with the input), each of which must also be present in both sweep
+residuals.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..lines import LINE_RATIO, find_lines, fit_sinusoids
+from ..lines import LINE_RATIO, driven, find_lines, fit_sinusoids
 from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction
@@ -33,9 +35,10 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     prediction = noise_prediction(ctx)
     residual = factor_residual(ctx, ctx.noise.y - prediction, prediction)[body_start:]
     u = ctx.noise.u[body_start:]
-    candidates = [line for line in find_lines(residual, u, ctx.fs, IDENTIFICATION_BAND,
-                                              known=model.disturbance_frequencies or ())
-                  if not within_resonance(ctx, line[0])]
+    peaks = [line for line in find_lines(residual, u, ctx.fs, IDENTIFICATION_BAND, known=model.disturbance_frequencies or ())
+             if not within_resonance(ctx, line[0])]
+    # A mode the model lacks or misplaces rings like a line in the residual, but the input explains it.
+    candidates = [line for line, by_input in zip(peaks, driven(residual, u, ctx.fs, [p[0] for p in peaks])) if not by_input]
     first = int(round(SKIP_S * ctx.fs))
     sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
     if candidates and has_series_factor(ctx):
