@@ -5,8 +5,8 @@ import pytest
 
 from sysid import lti
 from sysid.recordings import Recording
-from sysid.validation import (CompressedValidation, band_rms, noise_floor, rms_from_responses, simulated_rms,
-                              sweep_spectrum)
+from sysid.validation import (CompressedValidation, band_rms, noise_floor, repeat_lines, rms_from_responses,
+                              simulated_rms, sweep_spectrum, without_repeat_lines)
 
 
 def test_band_rms_of_a_sine_inside_and_outside_the_band():
@@ -62,3 +62,29 @@ def test_sweep_spectrum_equals_the_real_dfts_at_any_length(length):
     spectrum = sweep_spectrum(Recording(u, y, 8000.0), band=(0.0, 4000.0), skip_s=0.0)
     np.testing.assert_allclose(spectrum.U, np.fft.rfft(u), rtol=0, atol=1e-12 * np.sqrt(length))
     np.testing.assert_allclose(spectrum.Y, np.fft.rfft(y), rtol=0, atol=1e-12 * np.sqrt(length))
+
+
+def _hummed(recording: Recording, phase: float) -> Recording:
+    """The recording with a 50 Hz hum and two harmonics (1e-3 / k FS rms) at its own phase."""
+    t = np.arange(recording.y.size) / recording.fs
+    hum = sum(np.sqrt(2) * 1e-3 / k * np.sin(2 * np.pi * 50.0 * k * t + k * phase) for k in (1, 2, 3))
+    return Recording(recording.u, recording.y + hum, recording.fs, recording.path)
+
+
+def test_a_hum_not_locked_to_the_sweeps_is_no_output_noise(sessions):
+    # The repeats' difference keeps a hum of random phase (1.2e-3 FS, five times the floor): fitted out
+    # of the difference, the floor is the one without it, and the true plant validates at it on the
+    # sweeps with the lines taken out beside the sweep's response.
+    session = sessions["fb"]
+    clean = noise_floor(*session.sweeps)
+    hummed = [_hummed(s, phase) for s, phase in zip(session.sweeps, (0.3, 2.1))]
+    assert repeat_lines(*session.sweeps) == []
+    assert repeat_lines(*hummed) == pytest.approx([50.0, 100.0, 150.0], abs=0.05)
+    assert noise_floor(*hummed) == pytest.approx(clean, rel=0.02)
+    cleaned, lines = without_repeat_lines(*hummed)
+    assert len(lines) == 3
+    assert simulated_rms(session.plant, hummed) > 5 * clean
+    assert simulated_rms(session.plant, cleaned) == pytest.approx(simulated_rms(session.plant, session.sweeps), rel=0.05)
+    # A clean session is left as it is.
+    same, none = without_repeat_lines(*session.sweeps)
+    assert none == [] and all(a is b for a, b in zip(same, session.sweeps))
