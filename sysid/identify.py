@@ -36,7 +36,7 @@ from . import lti
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
 from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay
-from .lines import without_lines
+from .lines import undriven_lines, without_lines
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
 from .output_error import at_radius_bound, block_data, refine_output_error
@@ -128,7 +128,9 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     lag = _check_inputs(noise, sweeps, options)
     # A hum or engine order in the sweeps is neither plant nor output noise: fitted beside each sweep's
     # response and taken out, it inflates neither the floor nor the rms the order search steers by.
-    sweeps, lines = without_repeat_lines(*sweeps, options.validation_band, lag=lag)
+    head = noise.trimmed(options.transient_s).head(max(options.refine_seconds, options.scan_seconds))
+    sweeps, lines = without_repeat_lines(*sweeps, options.validation_band, lag=lag,
+                                         known=undriven_lines(head, options.band))
     fs = noise.fs
     seconds: dict[str, float] = {}
 

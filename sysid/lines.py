@@ -47,7 +47,7 @@ from .recordings import Recording
 from .thresholds import IDENTIFICATION_BAND
 
 __all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "SWEEP_WINDOW", "find_lines", "line_regressor",
-           "fit_sinusoids", "response_lines", "without_lines", "driven", "DRIVEN_WINDOW"]
+           "fit_sinusoids", "response_lines", "without_lines", "driven", "undriven_lines", "DRIVEN_WINDOW"]
 
 LINE_RATIO = 40.0
 MAX_LINES = 12
@@ -127,6 +127,13 @@ def driven(x: np.ndarray, u: np.ndarray, fs: float, frequencies) -> list[bool]:
         line = np.column_stack([kernel] + transient)
         answers.append(_least_squares_residual(response, X[k]) < _least_squares_residual(line, X[k]))
     return answers
+
+
+def undriven_lines(recording: Recording, band=IDENTIFICATION_BAND) -> list[float]:
+    """Frequencies (Hz) of the lines of a recording's ear signal that its input neither holds
+    (``find_lines``) nor explains (``driven``: the peaks of the plant's own modes)."""
+    peaks = [line[0] for line in find_lines(recording.y, recording.u, recording.fs, band)]
+    return [f for f, by_input in zip(peaks, driven(recording.y, recording.u, recording.fs, peaks)) if not by_input]
 
 
 def line_regressor(n: int, frequencies, fs: float) -> np.ndarray:
