@@ -71,6 +71,14 @@ decide, by the same rule (the largest delay within the tolerance of the smallest
 The ear signal's spectral lines that the input lacks (mains hum, an engine order) are fitted
 and taken out of the recording first (``without_lines``): no delay fits them, and left in
 they are most of the cost, which makes the relative tolerance span far more than the noise.
+``identify`` takes the session's lines out before the order search (``sysid.lines``); what it
+hands over here holds only lines too weak to be found there. Random helmet 102 FF with an
+engine order (41.7 Hz, 5.4e-4 FS, beside 9.2e-4 FS of sensor noise) and a pure delay: with the
+lines left in the recordings identify fits, the delay read 28 for 27 (one sample past within
+the tolerance, 0.28 % against 0.4 %, at the poles of a core fitted on hummed data); with the
+repeats' two lines out but the third harmonic (1.8e-4 FS, missed in the 2 s repeats) left in,
+23 (the move to 27 rejected on the sweeps); with all three out (the third found in the noise
+recording), 27. At the final model's poles every one of these recordings reads 27.
 """
 
 from __future__ import annotations

@@ -236,7 +236,10 @@ def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip
     engine order not phase-locked to the sweeps, ``repeat_lines``) are fitted and taken out of
     it first: deterministic, they are no output noise, and a model cannot be asked to reach
     them. The floor excludes nothing else (4 of the difference's samples' degrees of freedom per
-    line, a negligible share of its noise).
+    line, a negligible share of its noise). ``identify`` gives it the sweeps with the session's
+    lines already taken out (``without_repeat_lines``: also those found only in the noise
+    recording), so the ``noise_floor`` a model stores is the output noise without any line the
+    input lacks; on a session without such lines it is the plain repeat difference, as before.
     """
     difference, u = _difference(sweep1, sweep2, skip_s, lag)
     if difference.size < 2:

@@ -3,7 +3,11 @@
 Simulated as sinusoids at k * frequency_hz (k = 1..harmonics) at level / k (FS rms);
 detected as residual lines absent from the input (``sysid.findings.disturbance``);
 modelled as a disturbance (sinusoids fitted per recording and removed before the fit),
-not a part of the plant (``sysid.refits.add_periodic_disturbance``).
+not a part of the plant (``sysid.refits.add_periodic_disturbance``). Identification already
+takes the session's lines out of the recordings it fits and validates on, and out of the noise
+floor (``sysid.lines``, ``sysid.validation.without_repeat_lines``): the model's core is not bent
+toward them, and its error against the raw sweeps, the hum, stands above the floor for this
+finding to name.
 """
 
 from __future__ import annotations
