@@ -140,7 +140,9 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
         mask = excluded_mask(sweep, model.excluded)
         linear = model.simulate(sweep.u)
         residual = sweep.y - linear
-        disturbance = fit_sinusoids(residual[first:], model.disturbance_frequencies, fs)
+        # The lines are fitted where the model is judged: an excluded (clipped) stretch holds the
+        # clipper's error, tens of times the line, and would pull the fit over the whole sweep.
+        disturbance = fit_sinusoids(residual[first:], model.disturbance_frequencies, fs, keep=~mask[first:])
         disturbance = np.concatenate((np.zeros(first), disturbance))[: residual.size]
         predicted = linear + disturbance
         residual = np.where(mask, 0.0, residual - disturbance)

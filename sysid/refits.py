@@ -49,7 +49,7 @@ from .compare import compare, fit_sinusoids
 from .corrections import corrected, excluded_mask, recording_key
 from .errors import IdentificationError
 from .findings import DiagnosisContext
-from .findings.data_quality import clipped_stretches_of
+from .findings.data_quality import clipped_stretches_of, session_lines
 from .findings.nonlinearity import nonlinearity_finding
 from .findings.under_modelled import START_Q, worst_bands
 from .identify import IdentificationOptions, identify
@@ -80,11 +80,12 @@ def _plain_input(model):
     return lambda u: _shift(model.apply_input_nonlinearity(u), model.delay)
 
 
-def _disturbance(model: Model, recording: Recording, frequencies) -> np.ndarray:
-    """Sinusoids at frequencies fitted to the recording's residual under ``model``."""
+def _disturbance(model: Model, recording: Recording, frequencies, keep: np.ndarray | None = None) -> np.ndarray:
+    """Sinusoids at frequencies fitted to the recording's residual under ``model`` (over the ``keep``
+    samples: outside the excluded stretches, where the prediction fills in for the ear signal)."""
     if not frequencies:
         return np.zeros_like(recording.y)
-    return fit_sinusoids(recording.y - model.simulate(recording.u), frequencies, recording.fs)
+    return fit_sinusoids(recording.y - model.simulate(recording.u), frequencies, recording.fs, keep=keep)
 
 
 def _prepared(model: Model, recording: Recording) -> Recording:
@@ -109,8 +110,9 @@ def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
     """Recordings as the LTI core sees them: data corrections applied, mapped input, ear signal
     without the disturbance and the output offset."""
     prepared = [_prepared(model, r) for r in recordings]
-    return [Recording(input_map(r.u), r.y - model.output_offset - _disturbance(model, r, frequencies), r.fs, r.path)
-            for r in prepared]
+    kept = [~excluded_mask(r, model.excluded) for r in prepared]
+    return [Recording(input_map(r.u), r.y - model.output_offset - _disturbance(model, r, frequencies, keep), r.fs,
+                      r.path) for r, keep in zip(prepared, kept)]
 
 
 def _reidentify(model, noise, sweeps, input_map, frequencies, options, transient_s, extra_order: int = 2,
@@ -443,12 +445,15 @@ def add_clock_drift(model, noise, sweeps, params, options, transient_s):
 def with_clipping(model, noise, sweeps, params):
     """The model with the clipped stretches of every recording (either channel, any level, with margins;
     found on the ear signal as the model's clock ratio corrects it, the flat tops also against the
-    model's prediction) in its ``excluded``, core kept."""
+    model's prediction, after the session's lines are taken out of the ear signals) in its ``excluded``,
+    core kept."""
     excluded = dict(model.excluded)
     fractions = []
-    for recording in (noise, *sweeps):
-        resampled = corrected(recording, model.clock_ratio)
-        spans, _ = clipped_stretches_of(resampled, model.simulate(resampled.u))
+    recordings = [corrected(recording, model.clock_ratio) for recording in (noise, *sweeps)]
+    predictions = [model.simulate(recording.u) for recording in recordings]
+    lines = session_lines(recordings, predictions, model.disturbance_frequencies)
+    for recording, resampled, predicted in zip((noise, *sweeps), recordings, predictions):
+        spans, _ = clipped_stretches_of(resampled, predicted, lines)
         if spans:
             excluded[recording_key(recording)] = spans
         fractions.append(sum(b - a for a, b in spans) / recording.duration)

@@ -7,6 +7,8 @@ import scipy.signal
 from sysid.compare import compare
 from sysid.data_quality import clipped_against_prediction, clipped_samples, clipped_stretches
 from sysid.diagnose import diagnose, format_findings
+from sysid.findings.data_quality import clipped_stretches_of, ear_without_lines, session_lines
+from sysid.recordings import Recording
 from sysid.refine import format_refinement, refine, refine_auto
 
 from effect_sessions import TEST_REFIT, effect_case
@@ -81,6 +83,50 @@ class TestClippedAgainstPrediction:
         x = measured + 2e-4 * np.random.default_rng(6).standard_normal(measured.size)
         assert clipped_against_prediction(x, linear).fraction == 0.0
         assert clipped_samples(x, predicted=linear).fraction == 0.0
+
+
+def hum(t, rng, level=1.2e-3, f0=50.0):
+    """Mains hum of RMS level (FS) at f0 and its harmonics 2 and 3 at level/k, random phases."""
+    return sum(np.sqrt(2) * level / k * np.sin(2 * np.pi * k * f0 * t + rng.uniform(0, 2 * np.pi)) for k in (1, 2, 3))
+
+
+class TestClippedUnderAHum:
+    # A preamplifier flat-topping at 0.18 FS, then mains hum of 1.2e-3 FS coupling in after it (2.1e-3 FS
+    # peak, 1.2 % of the level, wider than the top bin): the tops are no longer flat.
+
+    def recording(self, peak, seed, level=0.18):
+        rng = np.random.default_rng(seed)
+        clean, _ = sweep_through(level, peak, seed)
+        t = np.arange(clean.size) / FS
+        u = np.linspace(0.0, 1.0, t.size) * np.sin(2 * np.pi * 200 * t)
+        y = np.clip(clean, -level, level) + hum(t, rng) + 1.5e-4 * rng.standard_normal(t.size)
+        return Recording(u, np.round(y * 32768) / 32768, FS, "sweep1.wav"), clean
+
+    def test_the_hum_hides_the_flat_tops_from_the_histogram_and_the_prediction(self):
+        recording, clean = self.recording(1.3, 7)
+        assert clipped_samples(recording.y).fraction == 0.0
+        assert clipped_samples(recording.y, predicted=clean).fraction == 0.0
+
+    def test_with_the_lines_taken_out_the_flat_tops_are_found_at_their_level(self):
+        recording, clean = self.recording(1.3, 7)
+        lines = session_lines([recording], [clean])
+        assert [round(f) for f in lines] == [50, 100, 150]
+        ear = ear_without_lines(recording, clean, lines)
+        truth = np.abs(clean) >= 0.18
+        # What is left is the clipped signal and the sensor noise: the flat tops within noise of 0.18.
+        assert np.all(np.abs(np.abs(ear[truth]) - 0.18) < 1e-3)
+        found = clipped_samples(ear, predicted=clean)
+        assert found.fraction == pytest.approx(np.mean(truth), rel=0.25)
+        assert np.mean(found.mask[truth]) > 0.95
+        assert len(found.levels) == 2 and all(abs(abs(v) - 0.18) < 0.002 for v in found.levels)
+        spans, fraction = clipped_stretches_of(recording, clean, lines)
+        assert spans and fraction == pytest.approx(found.fraction)
+
+    def test_an_unclipped_signal_under_a_hum_is_not_clipping(self):
+        recording, clean = self.recording(0.95, 8)
+        lines = session_lines([recording], [clean])
+        assert clipped_samples(ear_without_lines(recording, clean, lines), predicted=clean).fraction == 0.0
+        assert clipped_stretches_of(recording, clean, lines) == ([], 0.0)
 
 
 @pytest.mark.parametrize("path, effect", [("ff", "clipping:1.3"), ("ff", "clipping:1.5,0.3")])

@@ -26,6 +26,7 @@ TIME_VARIATION = register(Effect(
     # step 0: a linear change over the session; step k = 1 or 2: the change happens at once before sweep k.
     simulate_params=(ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0),
                      ParameterSpec("step", 0, 0, 2, "int")),
-    detect=time_variation_finding,
+    # The between-recordings test stands aside on clipped recordings (the clipping finding says which).
+    detect=time_variation_finding, needs=("clipping",),
     not_refinable="a path that changes while recording has no single model; identify per condition",
     kind="report", figure="segments", random=_random))

@@ -4,6 +4,15 @@ Neither is a property of the sound path; ``refine`` corrects for both: a DC offs
 on the ear signal becomes the model's ``output_offset``, and clipped stretches
 (at any level, either channel) are listed in the model's ``excluded`` and left out
 of identification and validation. The better remedy is on the recording side.
+
+A preamplifier flat-tops before mains hum or an engine order couples in, so the ear
+signal is y = clip(x) + h + n: the hum h moves the flat tops by its amplitude and smears
+the histogram spike at the clip level (a 50 Hz hum of 1.2e-3 FS on a preamplifier at
+0.18 FS: no spike, no flat top against the prediction). The lines that the input lacks
+are found in what the model leaves of the ear signals of every recording (a line the
+sweep's response hides in one recording stands out in another; the hum runs through the
+whole session), fitted where the ear signal is below ``LOUD`` of its extreme and taken
+out; what is left, clip(x) + n, piles up at the clip level again (``ear_without_lines``).
 """
 
 from __future__ import annotations
@@ -11,12 +20,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..corrections import recording_key
-from ..data_quality import DC_ABSOLUTE, clipped_samples, clipped_stretches, dc_offset
+from ..data_quality import DC_ABSOLUTE, RAILS_16BIT, clipped_samples, clipped_stretches, dc_offset
+from ..lines import find_lines, fit_sinusoids
 from ..recordings import Recording
+from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction
 
-__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of"]
+__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of", "session_lines", "ear_without_lines"]
 
 # The ear offset is read in up to the first LEAD_S of a sweep recording where the input is SILENT
 # (relative to its RMS) or less.
@@ -26,6 +37,11 @@ SILENT = 0.05
 # clipped spoils itself only; a clipped input misleads the model for its impulse response.
 EAR_MARGIN_S = 0.002
 INPUT_MARGIN_S = 0.02
+# The lines are fitted on the ear samples below LOUD of the extreme: the clipped stretches sit at the
+# extreme, and what the model leaves there is the clipper's error (up to tens of percent of the
+# level), not the hum, which would pull the fit. Half the extreme leaves room for a hum of up to half
+# the clip level.
+LOUD = 0.5
 
 
 def _recordings(ctx: DiagnosisContext):
@@ -75,36 +91,81 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
                    explanation, remedy, {"means_fs": [round(c[2], 8) for c in channels]})
 
 
-def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = None) -> tuple[list[list[float]], float]:
-    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction;
-    ``predicted``: a model's prediction of the ear signal (finds flat tops that noise hides from the histogram)."""
-    spans, fraction = [], 0.0
-    for x, margin, guess in ((recording.u, INPUT_MARGIN_S, None), (recording.y, EAR_MARGIN_S, predicted)):
-        clipping = clipped_samples(x, predicted=guess)
-        fraction = max(fraction, clipping.fraction)
-        spans += clipped_stretches(clipping.mask, recording.fs, margin)
+def session_lines(recordings, predictions, known=()) -> list[float]:
+    """Frequencies (Hz) of the lines that the inputs lack in what the model leaves of the ear signals
+    (y minus ``predictions``, the model's predictions without lines, FS), over every recording of a
+    session (``lines.find_lines``), with the ``known`` ones (the model's disturbance)."""
+    lines = [float(f) for f in known or ()]
+    for recording, predicted in zip(recordings, predictions):
+        n = min(recording.y.size, predicted.size)
+        found = find_lines(recording.y[:n] - predicted[:n], recording.u[:n], recording.fs, IDENTIFICATION_BAND, lines)
+        lines += [line[0] for line in found]
+    return sorted(lines)
+
+
+def ear_without_lines(recording: Recording, predicted: np.ndarray, lines) -> np.ndarray:
+    """The ear signal (FS) with the sinusoids at ``lines`` (Hz) taken out; see the module docstring.
+
+    The sinusoids are the least-squares fit (``lines.fit_sinusoids``) to y - ``predicted`` over the
+    samples where |y| is below ``LOUD`` of its largest value. Samples at the converter's rails keep
+    their value: the converter clips the sum, hum included. Without lines, y itself.
+    """
+    y = recording.y
+    if not lines:
+        return y
+    n = min(y.size, predicted.size)
+    left = y[:n] - predicted[:n]
+    level = np.abs(y[:n])
+    hum = np.zeros(y.size)
+    hum[:n] = fit_sinusoids(left, list(lines), recording.fs, keep=level < LOUD * float(np.max(level, initial=0.0)))
+    at_rails = (y <= RAILS_16BIT[0]) | (y >= RAILS_16BIT[1])
+    return np.where(at_rails, y, y - hum)
+
+
+def _channels(recording: Recording, predicted: np.ndarray | None, lines) -> dict[str, tuple]:
+    """{"input" | "ear": (Clipping, margin s)} of one recording; the ear's lines out first when predicted."""
+    ear = ear_without_lines(recording, predicted, lines) if predicted is not None else recording.y
+    return {"input": (clipped_samples(recording.u), INPUT_MARGIN_S),
+            "ear": (clipped_samples(ear, predicted=predicted), EAR_MARGIN_S)}
+
+
+def _stretches(recording: Recording, channels: dict[str, tuple]) -> list[list[float]]:
+    """The channels' clipped runs, each widened by its margin, merged over both channels ([start_s, stop_s])."""
     mask = np.zeros(recording.u.size, bool)
-    for start, stop in spans:
-        mask[int(round(start * recording.fs)):int(round(stop * recording.fs))] = True
-    return clipped_stretches(mask, recording.fs, 0.0), fraction
+    for clipping, margin in channels.values():
+        for start, stop in clipped_stretches(clipping.mask, recording.fs, margin):
+            mask[int(round(start * recording.fs)):int(round(stop * recording.fs))] = True
+    return clipped_stretches(mask, recording.fs, 0.0)
+
+
+def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = None, lines=()
+                         ) -> tuple[list[list[float]], float]:
+    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction;
+    ``predicted``: a model's prediction of the ear signal without lines (finds flat tops that noise hides
+    from the histogram); ``lines`` (Hz): the session's lines, taken out of the ear signal first
+    (``ear_without_lines``; needs ``predicted``)."""
+    channels = _channels(recording, predicted, lines)
+    return _stretches(recording, channels), max(clipping.fraction for clipping, _ in channels.values())
 
 
 def clipping_finding(ctx: DiagnosisContext) -> dict:
     """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``;
     on the ear channel also against the model's prediction, where noise after the clipper hides the
-    flat tops from the histogram)."""
+    flat tops from the histogram), after the session's lines are taken out of the ear signals
+    (``ear_without_lines``: a hum added after the clipper smears the flat tops)."""
     worst, where, levels = 0.0, "", []
     fractions, excluded = {}, {}
-    predictions = [noise_prediction(ctx)] + [record["predicted"] for record in ctx.comparison.per_sweep]
+    # The predictions without the model's lines: every line is fitted anew on each recording.
+    predictions = [noise_prediction(ctx)] + [record["linear"] for record in ctx.comparison.per_sweep]
+    lines = session_lines(_recordings(ctx), predictions, ctx.model.disturbance_frequencies)
     for recording, predicted in zip(_recordings(ctx), predictions):
-        for label, x, guess in (("input", recording.u, None), ("ear", recording.y, predicted)):
-            clipping = clipped_samples(x, predicted=guess)
+        channels = _channels(recording, predicted, lines)
+        for label, (clipping, _) in channels.items():
             fractions[f"{recording.path}:{label}"] = clipping.fraction
             if clipping.fraction > worst:
                 worst, where, levels = clipping.fraction, f"{label} channel of {recording.path}", clipping.levels
         # The stretches come from the same masks: a recording without a clipped sample has none.
-        spans = clipped_stretches_of(recording, predicted)[0] if any(
-            fractions[f"{recording.path}:{label}"] > 0 for label in ("input", "ear")) else []
+        spans = _stretches(recording, channels)
         if spans:
             excluded[recording_key(recording)] = spans
     already = bool(ctx.model.excluded) and all(ctx.model.excluded.get(k) for k in excluded)

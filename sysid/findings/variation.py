@@ -112,8 +112,11 @@ def recording_levels(ctx: DiagnosisContext) -> tuple[np.ndarray, dict[str, np.nd
     centres, noise_level, noise_error, sweep_levels = [], [], [], {s.path: [] for s in ctx.sweeps}
     spectra = []
     first = int(round(SKIP_S * ctx.fs))
-    for sweep in ctx.sweeps:
-        U, Y = np.fft.rfft(sweep.u[first:]), np.fft.rfft(sweep.y[first:])
+    for sweep, record in zip(ctx.sweeps, ctx.comparison.per_sweep):
+        # The model's excluded (clipped) stretches hold the clipper's levels, not the path's: there the
+        # model's prediction stands in, as in the comparison.
+        y = np.where(record["excluded"], record["predicted"], record["measured"])
+        U, Y = np.fft.rfft(sweep.u[first:]), np.fft.rfft(y[first:])
         spectra.append((np.fft.rfftfreq(sweep.u.size - first, 1 / ctx.fs), U, Y))
     for centre, low, high in third_octave_bands(*VALIDATION_BAND):
         use = (f >= low) & (f < high) & np.all(coherence > 0.5, axis=0)
@@ -146,8 +149,10 @@ def recording_change(ctx: DiagnosisContext) -> dict:
     centres, levels, error = recording_levels(ctx)
     low, mid = centres < LOW_HZ, (centres >= LOW_HZ) & (centres <= 2000.0)
     names = list(levels)
-    # A clipped recording's levels are the clipper's, not the path's (the clipping finding names it).
-    clipped = any(clipped_samples(x).fraction > 0 for r in (ctx.noise, *ctx.sweeps) for x in (r.u, r.y))
+    # A clipped recording's levels are the clipper's, not the path's (the clipping finding names it, also
+    # where a hum after the clipper hides the flat tops from the histogram).
+    clipped = any(f["effect"] == "clipping" and f["significant"] for f in ctx.findings) or any(
+        clipped_samples(x).fraction > 0 for r in (ctx.noise, *ctx.sweeps) for x in (r.u, r.y))
     if clipped or np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
         return {"changed": False, "pairs": {}, "odd_one_out": None, "change_db": 0.0}
 
