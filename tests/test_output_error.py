@@ -129,15 +129,45 @@ def test_added_pole_costs_equal_the_fixed_pole_cost_of_the_joined_poles(rng):
 
 def test_least_squares_through_the_gram_matrix_or_householder_equal_lstsq(rng):
     # Well conditioned: the Cholesky factor of the Gram matrix (Q implicit); nearly coinciding
-    # columns (condition 1e8): the Householder factors. Both give lstsq's solution and projector.
+    # columns (condition 1e8): shifted CholeskyQR3 (Q explicit, no column dropped). Both give
+    # lstsq's solution, projector and pseudo-inverse.
     well = rng.standard_normal((400, 6))
     ill = well.copy()
     ill[:, 5] = ill[:, 4] + 1e-8 * rng.standard_normal(400)
     rhs = rng.standard_normal(400)
+    g = rng.standard_normal((6, 3))
     for matrix, implicit in ((well, True), (ill, False)):
         matrix = matrix / np.linalg.norm(matrix, axis=0)
         factor, x = output_error._qr_solve(np.asfortranarray(matrix), rhs)
         assert (factor.q is None) == implicit
+        assert factor.keep is None
         expected = np.linalg.lstsq(matrix, rhs, rcond=None)[0]
         np.testing.assert_allclose(matrix @ x, matrix @ expected, atol=1e-7)
         np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ expected, atol=1e-7)
+    factor = output_error._Factor(np.asfortranarray(well / np.linalg.norm(well, axis=0)))
+    np.testing.assert_allclose(factor.q_times(factor.pinv_t(g)), np.linalg.pinv(well / np.linalg.norm(well, axis=0)).T @ g,
+                               atol=1e-10)
+
+
+@pytest.mark.parametrize("spread", [1.0, 1e-5])
+def test_coinciding_columns_are_dropped_with_the_minimum_norm_solution_of_lstsq(rng, spread):
+    # Coinciding poles give identical regressor columns (two real poles at z = 0), a pole pair at
+    # the origin a zero column. The dependent columns are dropped and written on the kept ones;
+    # the solution is lstsq's minimum-norm one, the projector and the pseudo-inverse are lstsq's.
+    # spread 1e-5 leaves the kept columns ill conditioned (shifted CholeskyQR3 on them).
+    base = rng.standard_normal((600, 5))
+    base[:, 4] = base[:, 3] + spread * rng.standard_normal(600)
+    matrix = np.column_stack([base, base[:, 1], np.zeros(600), base[:, 2] * 1.0])
+    scale = np.linalg.norm(matrix, axis=0)
+    matrix = np.asfortranarray(matrix / np.where(scale == 0, 1.0, scale))
+    rhs, g = rng.standard_normal(600), rng.standard_normal((8, 3))
+    factor, x = output_error._qr_solve(matrix, rhs)
+    dropped = set(factor.drop.tolist())
+    assert len(dropped) == 3 and 6 in dropped and dropped & {1, 5} and dropped & {2, 7}
+    assert (factor.q is None) == (spread == 1.0)
+    cutoff = np.finfo(float).eps * 600
+    expected = np.linalg.lstsq(matrix, rhs, rcond=cutoff)[0]
+    assert np.linalg.norm(x - expected) <= 1e-10 * np.linalg.norm(expected)
+    pinv = np.linalg.pinv(matrix, rcond=cutoff)
+    np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ pinv @ rhs, atol=1e-9)
+    np.testing.assert_allclose(factor.q_times(factor.pinv_t(g)), pinv.T @ g, atol=1e-7)
