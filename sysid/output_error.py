@@ -410,6 +410,7 @@ class _Problem:
         self.u_delayed = data.U * data.z ** (-delay)
         self.weight = np.ones(data.z.size) if prefilter is None else np.asarray(prefilter, dtype=complex)
         self.u_delayed = self.u_delayed * self.weight
+        self.rhs = np.concatenate([data.Y.real, data.Y.imag])
 
     def regression(self, poles):
         """(A, C, regressor, scales, rhs) for the poles: the modal (A, C), the [Re; Im] regressor of the
@@ -419,7 +420,7 @@ class _Problem:
         C = lti.block_output_row(A)
         basis = modal_basis(A, C, self.data.z)
         real, scale = _stacked_real(basis, [self.u_delayed, self.data.z], self.u_delayed if self.feedthrough else None)
-        return A, C, real, scale, np.concatenate([self.data.Y.real, self.data.Y.imag])
+        return A, C, real, scale, self.rhs
 
     def linear(self, poles):
         A, C, real, scale, rhs = self.regression(poles)
@@ -468,6 +469,13 @@ class _Projection:
         self._solve(x)
         return self._residual
 
+    def linear(self, x):
+        """(A, C, theta, residual) at x as ``_Problem.linear`` of its poles, from the last evaluation when
+        it was at x (MINPACK's last evaluation is usually its result)."""
+        self._solve(x)
+        A = lti.real_block_diagonal(self._poles)
+        return A, lti.block_output_row(A), self._theta, self._residual
+
     def jacobian(self, x):
         self._solve(x)
         p, theta, n, pairs = self.problem, self._theta, self._poles.size, self.pairs
@@ -488,20 +496,25 @@ class _Projection:
         # Coefficients of each block's columns: a pair's first column (g + h)/2 carries
         # theta_s u + theta_{n+s} z, its second (g - h)/2j carries theta_{s+1} u + theta_{n+s+1} z;
         # so dPhi theta = dp g^2 alpha + conj(dp) h^2 beta with alpha = (a - j b)/2, beta = (a + j b)/2.
+        # One row per pair (or real pole) and one column per bin: every row contiguous, and the
+        # derivative columns below copy row by row into the column-major Jacobian.
         s0 = 2 * np.arange(pairs)
-        a = u[:, None] * theta[s0] + zc * theta[n + s0]
-        b = u[:, None] * theta[s0 + 1] + zc * theta[n + s0 + 1]
-        g2 = (1.0 / (zc - upper)) ** 2
-        h2 = (1.0 / (zc - np.conj(upper))) ** 2
+        zr, ur = z[None, :], u[None, :]
+        a = ur * theta[s0, None] + zr * theta[n + s0, None]
+        b = ur * theta[s0 + 1, None] + zr * theta[n + s0 + 1, None]
+        g2 = (1.0 / (zr - upper[:, None])) ** 2
+        h2 = (1.0 / (zr - np.conj(upper)[:, None])) ** 2
         g_alpha = 0.5 * g2 * (a - 1j * b)
         h_beta = 0.5 * h2 * (a + 1j * b)
-        g_real = (1.0 / (zc - reals)) ** 2
-        dv = np.empty((m, count), dtype=complex)
+        g_real = (1.0 / (zr - reals[:, None])) ** 2
+        dv = np.empty((count, m), dtype=complex)
         block = pc // 2
-        dv[:, pc] = g_alpha[:, block] * dp[pc] + h_beta[:, block] * np.conj(dp[pc])
-        dv[:, rc] = g_real * (dp[rc] * (u[:, None] * theta[rc] + zc * theta[n + rc]))
+        # A pair's two parameters (pc = 0 .. 2 pairs - 1) share its block: broadcast, not gathered.
+        both = dp[pc].reshape(pairs, 2, 1)
+        dv[pc] = (g_alpha[:, None, :] * both + h_beta[:, None, :] * np.conj(both)).reshape(2 * pairs, m)
+        dv[rc] = g_real * (dp[rc, None] * (ur * theta[rc, None] + zr * theta[n + rc, None]))
         columns = np.empty((2 * m, count), order="F")
-        columns[:m], columns[m:] = dv.real, dv.imag
+        columns[:m], columns[m:] = dv.real.T, dv.imag.T
         # J = -(I - Q Q^T) dPhi theta [- Q R^-T g]: one product with Q for both terms.
         back = self._factor.qt(columns)
         if self._full:
@@ -510,11 +523,11 @@ class _Projection:
             r = self._residual[:m] + 1j * self._residual[m:]
             weights = np.stack([u * np.conj(r), z * np.conj(r)], axis=1)
             g = np.zeros((self._factor.columns, count))
-            gw, hw = g2.T @ weights, h2.T @ weights
+            gw, hw = g2 @ weights, h2 @ weights
             # d(first)/dx = (dp g^2 + conj(dp) h^2)/2, d(second)/dx = (dp g^2 - conj(dp) h^2)/2j.
             d_first = 0.5 * (dp[pc, None] * gw[block] + np.conj(dp[pc])[:, None] * hw[block])
             d_second = -0.5j * (dp[pc, None] * gw[block] - np.conj(dp[pc])[:, None] * hw[block])
-            d_real = dp[rc, None] * (g_real.T @ weights)
+            d_real = dp[rc, None] * (g_real @ weights)
             ps = state[pc]
             for offset, d in ((0, d_first), (1, d_second)):
                 g[ps + offset, pc] = d[:, 0].real / self._scale[ps + offset]
@@ -554,9 +567,9 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     params, pairs = _poles_to_params(poles, margin)
     projection = _Projection(problem, pairs)
 
-    start = projection.residual(params)
     # least_squares' "lm" counts iterations in max_nfev (the Jacobian is analytic, see _Projection).
     with _BLAS.limit(limits=1, user_api="blas"):
+        start = projection.residual(params)
         result = scipy.optimize.least_squares(projection.residual, params, jac=projection.jacobian, method="lm",
                                               x_scale="jac", max_nfev=max_iterations,
                                               ftol=1.0 / start.size if noise_tolerance else 1e-8)
@@ -565,7 +578,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     stable = np.all(np.abs(_params_to_poles(result.x, pairs, margin)) < 1.0)
     x = result.x if stable and np.sum(result.fun**2) <= np.sum(start**2) else params
     with _BLAS.limit(limits=1, user_api="blas"):
-        A_new, C_new, theta, final = problem.linear(_params_to_poles(x, pairs, margin))
+        A_new, C_new, theta, final = projection.linear(x)
     n = A_new.shape[0]
     B_new = theta[:n].reshape(n, 1)
     D_new = np.array([[theta[2 * n] if feedthrough else 0.0]])
