@@ -2,7 +2,7 @@
 
 A deterministic line is neither the plant's response nor output noise: identification,
 the noise floor, the delay search and the periodic-disturbance finding all take it out the
-same way, with the three functions here.
+same way, with the functions here.
 
 - ``find_lines``: the lines of x that u lacks. x is Hann-windowed and transformed in one
   piece; a line is a local maximum more than ``LINE_RATIO`` times the median of its
@@ -29,13 +29,15 @@ same way, with the three functions here.
 - ``fit_sinusoids``: least squares of x on the lines' columns (``line_regressor``).
 - ``response_lines``: the lines in a recording of the plant's response, where the response
   (a sweep's passes through every line frequency; a noise input's covers them all) is far
-  above the noise and a plain least-squares fit would take part of it for the line. In the DFT of the whole recording, the bins within ``SWEEP_WINDOW`` of each line are
-  modelled as the line's columns (their DFTs: a Dirichlet kernel, peaked at the line) plus a
-  response smooth in frequency, (c0 + c1 k + c2 k^2) U_k + (t0 + t1 k) (a plant response
+  above the noise and a plain least-squares fit would take part of it for the line. In the
+  DFT of the whole recording, the bins within ``RESPONSE_WINDOW`` of each line are modelled as
+  the line's columns (their DFTs: a Dirichlet kernel, peaked at the line) plus a response
+  smooth in frequency, (c0 + c1 k + c2 k^2) U_k + (t0 + t1 k) (a plant response
   locally quadratic in frequency, and the transient of a finite record, smooth in
-  frequency; Pintelon & Schoukens, "System Identification: A Frequency Domain Approach",
-  2nd ed., sec. 6.3, local polynomial method). The line's amplitudes come from that joint fit
-  and only the line is taken out.
+  frequency: the local polynomial method of Pintelon, Schoukens, Vandersteen & Barbe,
+  "Estimation of nonparametric noise and FRF models for multivariable systems, part I",
+  Mechanical Systems and Signal Processing 24(3), 2010). The line's amplitudes come from that
+  joint fit and only the line is taken out.
 """
 
 from __future__ import annotations
@@ -46,17 +48,17 @@ import scipy.ndimage
 from .recordings import Recording
 from .thresholds import IDENTIFICATION_BAND
 
-__all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "SWEEP_WINDOW", "find_lines", "line_regressor",
-           "fit_sinusoids", "response_lines", "without_lines", "driven", "undriven_lines", "DRIVEN_WINDOW"]
+__all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "RESPONSE_WINDOW", "DRIVEN_WINDOW", "find_lines", "driven",
+           "undriven_lines", "line_regressor", "fit_sinusoids", "response_lines", "without_lines"]
 
 LINE_RATIO = 40.0
 MAX_LINES = 12
 NEIGHBOURHOOD_HZ = 20.0
 # response_lines: DFT bins either side of a line in its local fit (2 x 5 + 1 complex bins, 22 real equations,
 # for 4 line and 10 response unknowns). Measured on random helmets 100-102 with a hum (2 s sweeps): what is
-# left of the hum is 1.0-1.7x the 16-bit quantisation's share at 5 bins, up to 6.5x at 20 (the response is
-# no longer quadratic over the window near a mode) and up to 3.5x at 3 (too few equations).
-SWEEP_WINDOW = 5
+# left of the hum is 1.0-1.9x the 16-bit quantisation's share at 5 bins, up to 26x at 20 (the response is
+# no longer quadratic over the window near a mode) and up to 7x at 3 (too few equations).
+RESPONSE_WINDOW = 5
 # driven: DFT bins either side of a peak in its two fits (at 5 s of residual, +-2 Hz).
 DRIVEN_WINDOW = 10
 
@@ -173,7 +175,7 @@ def response_lines(u: np.ndarray, y: np.ndarray, frequencies, fs: float) -> np.n
     beside the plant's response (see the module docstring); returns the fitted lines (FS)."""
     frequencies = [f for f in (frequencies or []) if 0 < f < fs / 2]
     n = y.size
-    if not frequencies or n < 8 * SWEEP_WINDOW:
+    if not frequencies or n < 8 * RESPONSE_WINDOW:
         return np.zeros_like(y)
     regressor = line_regressor(n, frequencies, fs)
     columns = np.fft.rfft(regressor, axis=0)
@@ -182,8 +184,8 @@ def response_lines(u: np.ndarray, y: np.ndarray, frequencies, fs: float) -> np.n
     rows, blocks = [], []
     for f in frequencies:
         centre = f * n / fs
-        k = np.arange(max(int(round(centre)) - SWEEP_WINDOW, 0), min(int(round(centre)) + SWEEP_WINDOW + 1, bins))
-        x = (k - centre) / SWEEP_WINDOW
+        k = np.arange(max(int(round(centre)) - RESPONSE_WINDOW, 0), min(int(round(centre)) + RESPONSE_WINDOW + 1, bins))
+        x = (k - centre) / RESPONSE_WINDOW
         rows.append(k)
         blocks.append(np.column_stack([U[k] * x**m for m in range(3)] + [x**m for m in range(2)]))
     k = np.concatenate(rows)
