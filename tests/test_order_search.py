@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from sysid import lti
+from sysid import lti, order_search
 from sysid.model import MAX_COEFFICIENT, Model
 from sysid.order_search import OrderCandidate, _insert_modes, _pair, block_at_noise, sweep_rms
 from sysid.output_error import block_data, refine_output_error
@@ -131,3 +131,15 @@ def test_a_model_missing_a_bass_mode_is_not_at_the_blocks_noise_level():
     # noise, so the search's patience for plateaus far above the floor still applies to it.
     block, sweeps, floor, stalled = _insertion_case()
     assert not block_at_noise(stalled.A, block, sweeps, floor, feedthrough=False)
+
+
+def test_a_plateau_far_above_the_floor_gets_the_mode_inserted_before_the_scan_goes_on(monkeypatch):
+    # With the residual-mode start held at 3 kHz no start of orders 1-5 holds the 35 Hz mode and the
+    # scan stalls at about 130x the floor (order 7's real-pole start finds it later). One order without
+    # gain (insert_patience=1) brings in the insertion, which reaches the floor: the scan ends there.
+    block, sweeps, floor, _ = _insertion_case()
+    monkeypatch.setattr(order_search, "_residual_mode", lambda poles, block, feedthrough: _pair(2 * np.pi * 3000.0 / FS, 10.0))
+    candidates = order_search.search_orders(block, sweeps, {}, {}, range(1, 31), floor, insert_patience=1)
+    assert min(c.rms for c in candidates[:5]) > 100 * floor
+    assert candidates[-1].order == 6 and "mode at 35 Hz" in candidates[-1].start
+    assert candidates[-1].rms <= 1.2 * floor
