@@ -148,7 +148,10 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
         residual = np.where(mask, 0.0, residual - disturbance)
         per_sweep.append({"path": sweep.path, "u": sweep.u, "measured": sweep.y, "predicted": predicted,
                           "linear": linear, "residual": residual, "fs": fs, "excluded": mask})
-        cleaned.append(Recording(sweep.u, np.where(mask, predicted, sweep.y - disturbance), fs, sweep.path))
+        # Without the lines on both sides of an excluded stretch's edges: the prediction there holds the
+        # fitted lines, whose phases differ from repeat to repeat (a hum of 1.7e-3 FS over 4 % of the
+        # samples put 2.5e-4 FS into the repeats' difference, 3.6 times the floor).
+        cleaned.append(Recording(sweep.u, np.where(mask, linear, sweep.y - disturbance), fs, sweep.path))
         kept.append(1.0 - float(np.mean(mask[first:])))
 
     tails = [s["residual"][first:] for s in per_sweep]
