@@ -154,24 +154,27 @@ def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndar
         c_modal = C[0] @ V
         t = np.arange(u.size)
         y = np.zeros(u.size)
-        u_complex = u.astype(complex)
         for p, b, c, x0_i in zip(poles, b_modal, c_modal, x0_modal):
             # Mode i: x_i(t+1) = p x_i(t) + b_i u(t), a first-order IIR. A real A gives
             # conjugate modes conjugate contributions (LAPACK returns conjugate
             # eigenvectors), so each pair is one filter counted twice in the real part.
             if p.imag < 0:
                 continue
-            # As a one-section sosfilt (the same difference equation, the same samples to the bit,
-            # a quarter less time than lfilter's general loop).
+            # As a one-section sosfilt (a quarter less time than lfilter's general loop).
             if p.imag == 0:
                 mode = scipy.signal.sosfilt([[0.0, b.real, 0.0, 1.0, -p.real, 0.0]], u)
-                weight = 1.0
+                y += (c * mode).real if x0_i == 0 else (c * (mode + x0_i * p ** t)).real
+            elif x0_i == 0:
+                # The pair's real part from rest is one real second-order section, 2 Re(c b / (z - p)) =
+                # (2 Re(g) z^-1 - 2 Re(g conj p) z^-2) / (1 - 2 Re(p) z^-1 + |p|^2 z^-2) with g = c b: half
+                # the time of the complex first-order filter (random helmet 10, order 18, two 10 s sweeps:
+                # 0.12 -> 0.06 s), the samples within 1e-13 of its largest.
+                g = c * b
+                y += scipy.signal.sosfilt([[0.0, 2 * g.real, -2 * (g * np.conj(p)).real, 1.0, -2 * p.real,
+                                            abs(p) ** 2]], u)
             else:
-                mode = scipy.signal.sosfilt([[0.0, b, 0.0, 1.0, -p, 0.0]], u_complex)
-                weight = 2.0
-            if x0_i != 0:
-                mode = mode + x0_i * p ** t
-            y += weight * (c * mode).real
+                mode = scipy.signal.sosfilt([[0.0, b, 0.0, 1.0, -p, 0.0]], u.astype(complex))
+                y += 2.0 * (c * (mode + x0_i * p ** t)).real
         return D * u + y
     _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
     return y[:, 0]

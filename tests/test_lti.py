@@ -66,3 +66,20 @@ def test_a_static_gain_has_its_gain_at_every_frequency():
                           np.full(7, 0.5 + 0j))
     several = lti.pole_residue_response(np.zeros((3, 0)), np.zeros((3, 0)), np.array([1.0, 2.0, 3.0]), z)
     assert np.array_equal(several, np.repeat([[1.0], [2.0], [3.0]], 7, axis=1).astype(complex))
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+@pytest.mark.parametrize("from_rest", [True, False])
+def test_simulate_equals_the_state_recursion(seed, from_rest):
+    # The modal simulation (a real second-order section per pole pair from rest, complex
+    # first-order filters with an initial state) against x(t+1) = A x + B u, y = C x + D u.
+    import scipy.signal
+
+    plant = random_plant(seed).model
+    A, B, C, D = lti.balanced_realisation(plant.A, plant.B, plant.C, plant.D)
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(3000)
+    x0 = None if from_rest else rng.standard_normal(A.shape[0])
+    _, expected, _ = scipy.signal.dlsim((A, B, C, D, 1.0), u, x0=x0)
+    y = lti.simulate(A, B, C, D, u, x0=x0)
+    np.testing.assert_allclose(y, expected[:, 0], atol=1e-9 * np.max(np.abs(expected)))
