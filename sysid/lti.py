@@ -176,8 +176,44 @@ def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndar
                 mode = scipy.signal.sosfilt([[0.0, b, 0.0, 1.0, -p, 0.0]], u.astype(complex))
                 y += 2.0 * (c * (mode + x0_i * p ** t)).real
         return D * u + y
-    _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
-    return y[:, 0]
+    if np.any(x0):
+        _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
+        return y[:, 0]
+    return D * u + _schur_response(A, B[:, 0], C[0], u)
+
+
+def _schur_response(A: np.ndarray, b: np.ndarray, c: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """c x(t) of x(t+1) = A x(t) + b u(t) from rest, through the real Schur form A = Z T Z^T.
+
+    For an A whose eigenvectors are too ill-conditioned for the modal form (coinciding poles):
+    T is quasi-upper-triangular, so its diagonal blocks are filtered from the last one up, each
+    driven by b's share and the already simulated later states (a 1 x 1 block is a first-order
+    filter, a 2 x 2 block (zI - T_kk)^-1 = adj(zI - T_kk) / det(zI - T_kk) two second-order
+    sections per state). Backward stable, and O(n^2) vector operations per sample block where
+    ``scipy.signal.dlsim``'s loop over samples took 5 s per 10 s sweep (random helmet 41, order 21).
+    """
+    T, Z = scipy.linalg.schur(A, output="real")
+    n = T.shape[0]
+    drive = Z.T @ b
+    states = np.zeros((n, u.size))
+    k = n
+    while k > 0:
+        size = 2 if k >= 2 and T[k - 1, k - 2] != 0 else 1
+        first = k - size
+        w = drive[first:k, None] * u[None, :]
+        if k < n:
+            w = w + T[first:k, k:] @ states[k:]
+        if size == 1:
+            states[first] = scipy.signal.sosfilt([[0.0, 1.0, 0.0, 1.0, -T[first, first], 0.0]], w[0])
+        else:
+            (t11, t12), (t21, t22) = T[first:k, first:k]
+            den = [1.0, -(t11 + t22), t11 * t22 - t12 * t21]
+            states[first] = (scipy.signal.sosfilt([[0.0, 1.0, -t22, *den]], w[0])
+                             + scipy.signal.sosfilt([[0.0, 0.0, t12, *den]], w[1]))
+            states[first + 1] = (scipy.signal.sosfilt([[0.0, 0.0, t21, *den]], w[0])
+                                 + scipy.signal.sosfilt([[0.0, 1.0, -t11, *den]], w[1]))
+        k = first
+    return (c @ Z) @ states
 
 
 def invariant_zeros(A, B, C, D) -> np.ndarray:

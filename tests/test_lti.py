@@ -83,3 +83,23 @@ def test_simulate_equals_the_state_recursion(seed, from_rest):
     _, expected, _ = scipy.signal.dlsim((A, B, C, D, 1.0), u, x0=x0)
     y = lti.simulate(A, B, C, D, u, x0=x0)
     np.testing.assert_allclose(y, expected[:, 0], atol=1e-9 * np.max(np.abs(expected)))
+
+
+def test_simulate_with_coinciding_poles_equals_the_state_recursion():
+    # Repeated poles (a Jordan block and a repeated pair) defeat the modal form; the Schur-form
+    # recursion must still give x(t+1) = A x + B u, y = C x + D u.
+    import scipy.signal
+
+    rng = np.random.default_rng(3)
+    pair = np.array([[0.95, 0.2], [-0.2, 0.95]])
+    A = np.zeros((7, 7))
+    A[:2, :2] = A[2:4, 2:4] = pair
+    A[0, 2] = 1.0
+    A[4:, 4:] = [[0.9, 1.0, 0.0], [0.0, 0.9, 1.0], [0.0, 0.0, 0.9]]
+    Q, _ = np.linalg.qr(rng.standard_normal((7, 7)))
+    A = Q @ A @ Q.T
+    B, C, D = rng.standard_normal((7, 1)), rng.standard_normal((1, 7)), np.array([[0.3]])
+    assert lti.modal_inverse(np.linalg.eig(A)[1])[0] is None
+    u = rng.standard_normal(2000)
+    _, expected, _ = scipy.signal.dlsim((A, B, C, D, 1.0), u)
+    np.testing.assert_allclose(lti.simulate(A, B, C, D, u), expected[:, 0], atol=1e-9 * np.max(np.abs(expected)))
