@@ -344,12 +344,11 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             else:  # the sweeps disagree: keep the onset's delay
                 extra = 0
     block = block_data(body, options.band, options.refine_seconds)
-    # Stopped once an iteration gains less than the poles' own standard error (output_error's
-    # standard_error_tolerance): the pick sits near the long block's minimum, each iteration costs 0.1 s,
-    # and MINPACK's default tolerance crawled on for 50 iterations (random helmet 5, thesis length: 18 s of
-    # CPU for 4e-6 of the cost).
+    # Stopped once an iteration gains less than the noise can tell (output_error's noise_tolerance, as every
+    # refinement here): the pick sits near the long block's minimum, and MINPACK's default tolerance crawled
+    # on for 50 iterations (random helmet 5, thesis length: 18 s of CPU for 4e-6 of the cost).
     oe = refine_output_error(pick.A, pick.B, pick.C, pick.D, block, feedthrough=options.feedthrough, max_iterations=60,
-                             standard_error_tolerance=True)
+                             noise_tolerance=True)
     A, B, C, D = oe.A, oe.B, oe.C, oe.D
     rms = time_rms(oe, delay)
     if rms > pick_rms:

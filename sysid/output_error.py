@@ -545,16 +545,9 @@ class _Projection:
         return jac
 
 
-def _relative_tolerance(parameters: int, residuals: int, noise_tolerance: bool, standard_error_tolerance: bool) -> float:
-    """MINPACK's ftol for ``refine_output_error``: P/N, 1/N or 1e-8 of the cost (see its docstring)."""
-    if standard_error_tolerance:
-        return parameters / residuals
-    return 1.0 / residuals if noise_tolerance else 1e-8
-
-
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
                         max_iterations: int = 60, prefilter: np.ndarray | None = None,
-                        noise_tolerance: bool = False, standard_error_tolerance: bool = False) -> OutputErrorFit:
+                        noise_tolerance: bool = False) -> OutputErrorFit:
     """Refine a stable model's poles and zeros on raw DFT data; see the module docstring.
 
     The returned model is balanced (``lti.balanced_realisation``).
@@ -565,17 +558,6 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     ftol; otherwise 1e-8). On the final 10 s block of random helmet 5 (thesis-length session,
     order 17) the cost fell 0.29 % in 10 iterations, then 4e-6 more in 50 (18 s of CPU),
     the validation rms 1.016x the floor throughout.
-
-    ``standard_error_tolerance`` stops sooner, once an iteration lowers the cost by less than
-    P sigma^2 (P/N of it, P the pole parameters): what fitting those P parameters to noise alone
-    gains (a chi-square of P degrees of freedom), so the poles then lie within about one standard
-    error of the minimum (the argument behind Akaike's FPE: Ljung, System Identification, 2nd ed.,
-    1999, ch. 16). For a warm start on a
-    long block, where each iteration is costly: the final 10 s refinement of random helmets 0-14
-    (thesis length) stopped after 4-11 evaluations, the last ones gaining 1e-5 to 4e-5 of the
-    cost, and ends here 3-7 evaluations sooner with the same orders and validation rms to 0.01x
-    of the floor. The order scan keeps ``noise_tolerance`` alone: its 1 s refinements stopped
-    this way took other paths (helmets 6 and 13 ended at 1.15x and 1.21x).
 
     ``prefilter`` (complex response at the data's bins) is a fixed factor F in series
     in front of the fitted system: the fit is of Y = G F z^-d U, and the returned
@@ -596,8 +578,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
         start = projection.residual(params)
         result = scipy.optimize.least_squares(projection.residual, params, jac=projection.jacobian, method="lm",
                                               x_scale="jac", max_nfev=max_iterations,
-                                              ftol=_relative_tolerance(params.size, start.size, noise_tolerance,
-                                                                         standard_error_tolerance))
+                                              ftol=1.0 / start.size if noise_tolerance else 1e-8)
     # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
     # result is not stable and the starting poles are kept instead.
     stable = np.all(np.abs(_params_to_poles(result.x, pairs, margin)) < 1.0)

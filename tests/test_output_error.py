@@ -64,28 +64,6 @@ def test_noise_tolerance_stops_early_at_the_same_cost_within_one_noise_variance(
     assert quick.cost_after < 0.5 * quick.cost_before
 
 
-def test_standard_error_tolerance_stops_within_the_poles_standard_error(rng):
-    # The same start: stopped once an iteration gains less than P sigma^2 (P = 5 pole parameters),
-    # it leaves at most a few P sigma^2 above the minimum, never more iterations than the noise
-    # tolerance, and the poles within their standard error's reach of the full refinement's.
-    plant = appendix_a_model("ff")
-    data = block_data(_noise_recording(plant, rng, seconds=2.0, output_noise=1e-3), max_seconds=None)
-    poles = np.linalg.eigvals(plant.A)
-    start = lti.real_block_diagonal(poles * (1 - 0.003) * np.exp(0.01j * np.sign(poles.imag)))
-    args = (start, np.ones((5, 1)), np.ones((1, 5)), np.zeros((1, 1)), data)
-    full = refine_output_error(*args)
-    noise = refine_output_error(*args, noise_tolerance=True)
-    settled = refine_output_error(*args, standard_error_tolerance=True)
-    residuals, parameters = 2 * data.z.size, poles.size
-    assert settled.iterations <= noise.iterations
-    assert settled.cost_after <= full.cost_after * (1 + 3.0 * parameters / residuals)
-    assert settled.cost_after < 0.5 * settled.cost_before
-    f = np.linspace(20, 5000, 200)
-    z = np.exp(2j * np.pi * f / plant.fs)
-    error = np.abs(lti.frequency_response(settled.A, settled.B, settled.C, settled.D, z) - plant.frequency_response(f))
-    assert np.max(error) < 0.01 * np.max(np.abs(plant.frequency_response(f)))
-
-
 def test_jacobian_matches_central_differences_in_and_out_of_band(rng):
     # The closed-form derivatives of the block bases, in band and out of it (pairs at 1.5 and
     # 2.9 rad/sample lie outside the 20 Hz-5 kHz bins of a 48 kHz block).
