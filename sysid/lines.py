@@ -46,12 +46,11 @@ import numpy as np
 import scipy.ndimage
 
 from .recordings import Recording
-from .thresholds import IDENTIFICATION_BAND
+from .thresholds import IDENTIFICATION_BAND, LINE_RATIO
 
 __all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "RESPONSE_WINDOW", "DRIVEN_WINDOW", "find_lines", "driven",
            "undriven_lines", "line_regressor", "fit_sinusoids", "response_lines", "without_lines"]
 
-LINE_RATIO = 40.0
 MAX_LINES = 12
 NEIGHBOURHOOD_HZ = 20.0
 # response_lines: DFT bins either side of a line in its local fit (2 x 5 + 1 complex bins, 22 real equations,

@@ -9,7 +9,8 @@ otherwise. Detectors and ``refine`` import them from here, so the meaning of
 from __future__ import annotations
 
 __all__ = ["AT_FLOOR", "EXCESS", "UNDER_MODELLED_EXCESS", "EXPLAINS_GAIN", "FACTOR_EXPLAINS", "WORSE",
-           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG"]
+           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG",
+           "LINE_RATIO"]
 
 # Validation rms at most this many times the noise floor counts as at the floor.
 AT_FLOOR = 1.2
@@ -37,3 +38,7 @@ TRANSIENT_S = 3.0
 # by more than the run-to-run noise of that figure, and never by less than this fraction.
 MAX_AUTO_STEPS = 8
 RUN_TO_RUN_MIN = 0.01
+
+# A spectral line (hum, engine order: ``sysid.lines.find_lines``) is a local maximum of the ear's
+# periodogram more than this many times the median of its neighbourhood, where the input's is not.
+LINE_RATIO = 40.0
