@@ -30,13 +30,12 @@ import numpy as np
 
 from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
-# One line fit for the whole package (sysid.lines); named here too, where the disturbance model is applied.
 from .lines import fit_sinusoids
 from .recordings import Recording, check_same_rate
 from .validation import (VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag,
                          validation_start)
 
-__all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "fit_sinusoids", "LAGS", "BOUND_99"]
+__all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "LAGS", "BOUND_99"]
 
 LAGS = 25
 BOUND_99 = 2.58

@@ -69,7 +69,7 @@ decide, by the same rule (the largest delay within the tolerance of the smallest
   j = -4..0.
 
 The ear signal's spectral lines that the input lacks (mains hum, an engine order) are fitted
-and taken out of the recording first (``without_lines``): no delay fits them, and left in
+and taken out of the recording first (``without_residual_lines``): no delay fits them, and left in
 they are most of the cost, which makes the relative tolerance span far more than the noise.
 ``identify`` takes the session's lines out before the order search (``sysid.lines``); what it
 hands over here holds only lines too weak to be found there. Random helmet 102 FF with an
@@ -185,7 +185,7 @@ def compensate_delay(recording: Recording, samples: int) -> Recording:
     return Recording(u, y, recording.fs, recording.path, recording.clipped_fraction, recording.dc_offset)
 
 
-def without_lines(noise: Recording, band: tuple[float, float], A=None, seconds: float = 1.0,
+def without_residual_lines(noise: Recording, band: tuple[float, float], A=None, seconds: float = 1.0,
                   feedthrough: bool = False) -> Recording:
     """``noise`` with the ear signal's spectral lines that the input lacks fitted and taken out
     (``lines.find_lines``, ``lines.fit_sinusoids``): the recording itself when it
@@ -231,7 +231,7 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
     (``output_error.refine_output_error``, _REFIT_ITERATIONS), and the refitted costs decide
     (infinite where not refitted).
     """
-    noise = without_lines(noise, band, A, seconds, feedthrough)
+    noise = without_residual_lines(noise, band, A, seconds, feedthrough)
 
     def block(j):
         return block_data(compensate_delay(noise, j), band, seconds)

@@ -45,7 +45,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from .compare import compare, fit_sinusoids
+from .compare import compare
 from .corrections import corrected, excluded_mask, recording_key
 from .errors import IdentificationError
 from .findings import DiagnosisContext
@@ -53,6 +53,7 @@ from .findings.data_quality import clipped_stretches_of, session_lines
 from .findings.nonlinearity import nonlinearity_finding
 from .findings.under_modelled import START_Q, worst_bands
 from .identify import IdentificationOptions, identify
+from .lines import fit_sinusoids
 from .model import Model
 from .output_error import BlockData, block_data, refine_output_error
 from .recordings import Recording

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sysid import lti
-from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay, without_lines
+from sysid.latency import compensate_delay, delay_centimetres, estimate_latency, refine_delay, without_residual_lines
 from sysid.model import Model
 from sysid.output_error import block_data, linear_cost, refine_output_error
 from sysid.random_plant import random_plant, random_session
@@ -108,10 +108,10 @@ class TestRefineDelay:
         t = np.arange(body.y.size) / body.fs
         hum = sum(1e-2 / k * np.sin(2 * np.pi * 41.7 * k * t + k) for k in (1, 2, 3))
         hummed = Recording(body.u, body.y + hum, body.fs)
-        cleaned = without_lines(hummed, BAND, rp.model.A)
+        cleaned = without_residual_lines(hummed, BAND, rp.model.A)
         # The core's linear step, fitted with the hum in, bends a little towards a line near a mode.
         assert np.std(cleaned.y - body.y) < 0.2 * np.std(hum)
-        assert without_lines(body, BAND, rp.model.A) is body
+        assert without_residual_lines(body, BAND, rp.model.A) is body
         extra, _ = refine_delay(rp.model.A, hummed, BAND, 1.0, delay=rp.delay + 3)
         assert extra == -3
 
