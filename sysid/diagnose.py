@@ -3,7 +3,10 @@
 ``diagnose(model, noise, sweeps)`` compares the model with the sweeps
 (``sysid.compare``) and runs the detector of every effect in the registry
 (``sysid.effects``; the detectors live in ``sysid.findings``), each after the
-detectors of the effects it declares it needs. The built-in effects:
+detectors of the effects it declares it needs, reading only the shared values it
+declares it uses (``sysid.findings.uses``: the noise recording's prediction, the
+session's one line search, ...; each computed once per diagnosis by its provider).
+The built-in effects:
 
 - data quality, straight from the recordings: ``dc-offset``, ``clipping``;
 - the plant: ``delay`` (fixed-pole delay scan), ``input-nonlinearity`` (residual
@@ -92,7 +95,12 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
     ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
     findings = ctx.findings
     for detector in registry.detector_order():
-        found = detector(ctx)
+        # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
+        ctx.readable = getattr(detector, "uses", None)
+        try:
+            found = detector(ctx)
+        finally:
+            ctx.readable = None
         findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))
     findings[:] = _leading_first(findings)

@@ -1,16 +1,24 @@
 """Detectors of the physical effects a model misses, one module per family of effects.
 
 Each detector takes a ``DiagnosisContext`` (the model, the recordings, the
-comparison on the sweeps and the findings of the detectors it needs) and returns
-``Finding`` records; ``Finding.to_dict`` is the entry of design.md's diagnosis JSON
+comparison on the sweeps, the findings of the detectors it needs and the shared
+values it declares it reads) and returns ``Finding`` records; ``Finding.to_dict`` is the entry of design.md's diagnosis JSON
 ``{"effect", "significant", "score", "params", "explanation", "remedy", "evidence"}``. ``score`` is the detector's statistic divided by its
 significance threshold, so a finding is significant when its score reaches 1
 (and its other conditions hold); scores of different detectors rank findings.
+
+Shared values: what several detectors read (the model's prediction of the noise
+recording, the session's line search, the segments' responses) is computed once per
+context by a named provider (``provider``), a function of the context's model,
+recordings and comparison only, never of findings, so no detector's result depends on
+which detector asked first. A detector declares the values it reads (``uses``), and
+``diagnose`` lets it read those only (``DiagnosisContext.value``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -19,9 +27,29 @@ from ..model import Model
 from ..recordings import Recording
 from ..thresholds import TRANSIENT_S
 
-__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "SPEED_OF_SOUND"]
+__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "SPEED_OF_SOUND", "PROVIDERS",
+           "provider", "uses"]
 
 SPEED_OF_SOUND = 343.0  # m/s in air at 20 degC
+
+# The shared values' providers by name: provider(ctx) -> value.
+PROVIDERS: dict[str, Callable] = {}
+
+
+def provider(name: str):
+    """Register the decorated ``function(ctx)`` as the provider of the shared value ``name``."""
+    def register(function: Callable) -> Callable:
+        PROVIDERS[name] = function
+        return function
+    return register
+
+
+def uses(*names: str):
+    """Declare the shared values the decorated detector reads (its ``uses`` attribute)."""
+    def declare(detector: Callable) -> Callable:
+        detector.uses = tuple(names)
+        return detector
+    return declare
 
 
 @dataclass
@@ -36,7 +64,25 @@ class DiagnosisContext:
     # The findings of the detectors run so far (``diagnose`` runs a detector after those of the
     # effects it declares it needs: ``sysid.effects.Effect.needs``).
     findings: list = field(default_factory=list)
-    cache: dict = field(default_factory=dict)
+    # The shared values computed so far (``value``), and the names the running detector declared
+    # (``diagnose`` sets them around each detector; None: any, for a context used outside diagnose).
+    values: dict = field(default_factory=dict)
+    readable: tuple[str, ...] | None = None
+
+    def value(self, name: str):
+        """The shared value ``name``, computed by its provider (``PROVIDERS``) once per context."""
+        if self.readable is not None and name not in self.readable:
+            raise KeyError(f"shared value {name!r} is read by a detector that does not declare it (findings.uses)")
+        if name not in self.values:
+            if name not in PROVIDERS:
+                raise KeyError(f"no provider of the shared value {name!r}")
+            # A provider reads other shared values freely: they too are functions of the inputs alone.
+            readable, self.readable = self.readable, None
+            try:
+                self.values[name] = PROVIDERS[name](self)
+            finally:
+                self.readable = readable
+        return self.values[name]
 
     @property
     def fs(self) -> float:
@@ -123,11 +169,15 @@ def finding(effect: str, significant: bool, score: float, params: dict, explanat
                    {k: _plain(v) for k, v in (evidence or {}).items()})
 
 
+@provider("noise-prediction")
+def _predict_noise(ctx: DiagnosisContext) -> np.ndarray:
+    return ctx.model.simulate(ctx.noise.u)
+
+
 def noise_prediction(ctx: DiagnosisContext) -> np.ndarray:
-    """The model's prediction of the whole noise recording's ear signal (FS), computed once per context."""
-    if "noise_prediction" not in ctx.cache:
-        ctx.cache["noise_prediction"] = ctx.model.simulate(ctx.noise.u)
-    return ctx.cache["noise_prediction"]
+    """The model's prediction of the whole noise recording's ear signal (FS): the shared value
+    ``noise-prediction``."""
+    return ctx.value("noise-prediction")
 
 
 def linear_part(model: Model) -> Model:

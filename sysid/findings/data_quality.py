@@ -13,9 +13,14 @@ are found in what the model leaves of the ear signals of every recording (a line
 sweep's response hides in one recording stands out in another; the hum runs through the
 whole session), fitted where the ear signal is below ``LOUD`` of its extreme and taken
 out; what is left, clip(x) + n, piles up at the clip level again (``ear_without_lines``).
+That search is the session's one line search in a diagnosis (the shared value
+``session-lines``, ``line_search``): the periodic-disturbance finding judges the lines
+it found on the noise recording.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,9 +30,10 @@ from ..lines import find_lines, fit_sinusoids
 from ..recordings import Recording
 from ..thresholds import IDENTIFICATION_BAND
 from ..validation import SKIP_S
-from . import DiagnosisContext, finding, noise_prediction
+from . import DiagnosisContext, finding, noise_prediction, provider, uses
 
-__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of", "session_lines", "ear_without_lines"]
+__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of", "session_lines", "ear_without_lines",
+           "SessionLines", "line_search"]
 
 # The ear offset is read in up to the first LEAD_S of a sweep recording where the input is SILENT
 # (relative to its RMS) or less.
@@ -48,6 +54,7 @@ def _recordings(ctx: DiagnosisContext):
     return [ctx.noise, *ctx.sweeps]
 
 
+@uses()
 def dc_offset_finding(ctx: DiagnosisContext) -> dict:
     """Offsets of the input channels, and of the ear channel against the model's prediction.
 
@@ -91,18 +98,46 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
                    explanation, remedy, {"means_fs": [round(c[2], 8) for c in channels]})
 
 
-def session_lines(recordings, predictions, known=()) -> list[float]:
-    """Frequencies (Hz) of the lines that the inputs lack in what the model leaves of the ear signals
-    (y minus ``predictions``, the model's predictions without lines, FS), over every recording of a
-    session (``lines.find_lines``), with the ``known`` ones (the model's disturbance)."""
+@dataclass(frozen=True)
+class SessionLines:
+    """The lines of a session (``line_search``): ``found`` per recording, in the order searched, the
+    ``lines.find_lines`` tuples (frequency Hz, ratio to neighbourhood, RMS level FS) of the lines not
+    found before (in ``known`` or an earlier recording); ``frequencies`` (Hz) all of them with the
+    ``known`` ones, sorted."""
+
+    found: tuple[tuple[tuple[float, float, float], ...], ...]
+    frequencies: tuple[float, ...]
+
+
+def line_search(recordings, predictions, known=()) -> SessionLines:
+    """The lines that the inputs lack in what the model leaves of the ear signals (y minus
+    ``predictions``, the model's predictions without lines, FS), over every recording of a session
+    (``lines.find_lines``); ``known`` (Hz): the model's disturbance, not searched again."""
     lines = [float(f) for f in known or ()]
+    found = []
     for recording, predicted in zip(recordings, predictions):
         n = min(recording.y.size, predicted.size)
         # Where the ear signal is loud it may be clipped, and what the model leaves there is the clipper's
         # broadband error (a quarter of the samples clipped buries a 50 Hz hum): searched without them.
         left = np.where(_quiet(recording.y[:n]), recording.y[:n] - predicted[:n], 0.0)
-        lines += [line[0] for line in find_lines(left, recording.u[:n], recording.fs, IDENTIFICATION_BAND, lines)]
-    return sorted(lines)
+        found.append(tuple(find_lines(left, recording.u[:n], recording.fs, IDENTIFICATION_BAND, lines)))
+        lines += [line[0] for line in found[-1]]
+    return SessionLines(tuple(found), tuple(sorted(lines)))
+
+
+def session_lines(recordings, predictions, known=()) -> list[float]:
+    """Frequencies (Hz) of the lines that the inputs lack in what the model leaves of the ear signals,
+    over every recording of a session, with the ``known`` ones (``line_search``)."""
+    return list(line_search(recordings, predictions, known).frequencies)
+
+
+@provider("session-lines")
+def session_line_search(ctx: DiagnosisContext) -> SessionLines:
+    """The shared value ``session-lines``: ``line_search`` on the noise recording then the sweeps, the
+    predictions without the model's lines (every line is fitted anew on each recording), the model's
+    disturbance known."""
+    predictions = [noise_prediction(ctx)] + [record["linear"] for record in ctx.comparison.per_sweep]
+    return line_search(_recordings(ctx), predictions, ctx.model.disturbance_frequencies)
 
 
 def _quiet(y: np.ndarray) -> np.ndarray:
@@ -154,6 +189,7 @@ def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = No
     return _stretches(recording, channels), max(clipping.fraction for clipping, _ in channels.values())
 
 
+@uses("noise-prediction", "session-lines")
 def clipping_finding(ctx: DiagnosisContext) -> dict:
     """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``;
     on the ear channel also against the model's prediction, where noise after the clipper hides the
@@ -163,7 +199,7 @@ def clipping_finding(ctx: DiagnosisContext) -> dict:
     fractions, excluded = {}, {}
     # The predictions without the model's lines: every line is fitted anew on each recording.
     predictions = [noise_prediction(ctx)] + [record["linear"] for record in ctx.comparison.per_sweep]
-    lines = session_lines(_recordings(ctx), predictions, ctx.model.disturbance_frequencies)
+    lines = list(ctx.value("session-lines").frequencies)
     for recording, predicted in zip(_recordings(ctx), predictions):
         channels = _channels(recording, predicted, lines)
         for label, (clipping, _) in channels.items():

@@ -20,7 +20,7 @@ from ..output_error import BlockData, block_data, linear_cost, refine_output_err
 from ..recordings import Recording
 from ..thresholds import EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG
 from ..validation import VALIDATION_BAND, rms_from_responses, sweep_spectrum
-from . import SPEED_OF_SOUND, DiagnosisContext, finding
+from . import SPEED_OF_SOUND, DiagnosisContext, finding, provider, uses
 from .dynamics import arbitrate, series_factor_finding
 
 __all__ = ["delay_finding", "scan_delay", "refit_rms", "MAX_EXTRA_DELAY"]
@@ -33,14 +33,21 @@ CLEAR_RATIO = 1.5
 REFIT_GAIN = EXPLAINS_GAIN
 
 
+@provider("delay-scan-data")
 def _scan_data(ctx: DiagnosisContext) -> BlockData:
-    if "delay_data" not in ctx.cache:
-        body = ctx.body
-        v = ctx.model.apply_input_nonlinearity(body.u)
-        full = block_data(Recording(v, body.y, body.fs, body.path), IDENTIFICATION_BAND, 1.0)
-        # Every 4th bin of a 1 s block: the cost's shape in d is kept, the solve is 4x cheaper.
-        ctx.cache["delay_data"] = BlockData(full.z[::4], full.U[::4], full.Y[::4], full.length, full.fs)
-    return ctx.cache["delay_data"]
+    """The shared value ``delay-scan-data``: the noise recording's 1 s block data for the delay scan."""
+    body = ctx.body
+    v = ctx.model.apply_input_nonlinearity(body.u)
+    full = block_data(Recording(v, body.y, body.fs, body.path), IDENTIFICATION_BAND, 1.0)
+    # Every 4th bin of a 1 s block: the cost's shape in d is kept, the solve is 4x cheaper.
+    return BlockData(full.z[::4], full.U[::4], full.Y[::4], full.length, full.fs)
+
+
+@provider("delay-sweep-spectra")
+def _sweep_spectra(ctx: DiagnosisContext) -> list:
+    """The shared value ``delay-sweep-spectra``: the sweeps' DFT bins, input through the model's polynomial."""
+    model = ctx.model
+    return [sweep_spectrum(Recording(model.apply_input_nonlinearity(s.u), s.y, s.fs, s.path)) for s in ctx.sweeps]
 
 
 def refit_rms(ctx: DiagnosisContext, A, B, C, D, delay: int, max_iterations: int = 20) -> float:
@@ -51,12 +58,9 @@ def refit_rms(ctx: DiagnosisContext, A, B, C, D, delay: int, max_iterations: int
     (``sysid.validation.rms_from_responses``).
     """
     model = ctx.model
-    if "sweep_spectra" not in ctx.cache:
-        ctx.cache["sweep_spectra"] = [sweep_spectrum(Recording(model.apply_input_nonlinearity(s.u), s.y, s.fs, s.path))
-                                      for s in ctx.sweeps]
-    spectra = ctx.cache["sweep_spectra"]
+    spectra = ctx.value("delay-sweep-spectra")
     with threadpool_limits(limits=1, user_api="blas"):
-        fit = refine_output_error(A, B, C, D, _scan_data(ctx), delay=delay, max_iterations=max_iterations,
+        fit = refine_output_error(A, B, C, D, ctx.value("delay-scan-data"), delay=delay, max_iterations=max_iterations,
                                   feedthrough=bool(D[0, 0]))
     responses = []
     for s in spectra:
@@ -85,7 +89,7 @@ def generic_scan(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY) -> int
     f0 = np.geomspace(30.0, 4500.0, 12)
     upper = np.exp(-np.pi * f0 / (2.0 * ctx.fs)) * np.exp(2j * np.pi * f0 / ctx.fs)
     A = lti.real_block_diagonal(np.concatenate([upper, np.conj(upper), [0.9, 0.99]]))
-    data = _scan_data(ctx)
+    data = ctx.value("delay-scan-data")
     with threadpool_limits(limits=1, user_api="blas"):
         coarse = {d: linear_cost(A, data, d) for d in range(model.delay, model.delay + max_extra + 1, 2)}
         centre = min(coarse, key=coarse.get)
@@ -101,7 +105,7 @@ def scan_delay(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY, coarse: 
     samples towards a missing delay, so the step of 2 still lands next to its minimum.
     """
     model = ctx.model
-    data = _scan_data(ctx)
+    data = ctx.value("delay-scan-data")
     delays = np.arange(0, model.delay + max_extra + 1)
     costs = np.full(delays.size, np.nan)
     with threadpool_limits(limits=1, user_api="blas"):
@@ -116,6 +120,7 @@ def scan_delay(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY, coarse: 
     return int(delays[np.nanargmin(costs)]), costs
 
 
+@uses("delay-scan-data", "delay-sweep-spectra", "sweep-bins")
 def delay_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     best, costs = scan_delay(ctx, coarse=True)

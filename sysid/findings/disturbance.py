@@ -1,20 +1,21 @@
 """Periodic disturbance: spectral lines in the residual that are not in the input (effects.md).
 
-The lines of the model's residual on the noise recording (after the transient) that the
-input lacks (``sysid.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
-neighbourhood) and does not explain (``sysid.lines.driven``: a mode the model lacks peaks in
-the residual too, coherent with the input), each of which must also be present in both sweep
-residuals.
+The lines of the model's residual on the noise recording that the input lacks
+(``sysid.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
+neighbourhood; the session's one line search, the shared value ``session-lines`` of
+``sysid.findings.data_quality``, which searches the noise recording first with the model's
+own lines known) and does not explain (``sysid.lines.driven`` on the residual after the
+transient: a mode the model lacks peaks in the residual too, coherent with the input), each
+of which must also be present in both sweep residuals.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..lines import LINE_RATIO, driven, find_lines, fit_sinusoids
-from ..thresholds import IDENTIFICATION_BAND
+from ..lines import LINE_RATIO, driven, fit_sinusoids
 from ..validation import SKIP_S
-from . import DiagnosisContext, finding, noise_prediction
+from . import DiagnosisContext, finding, noise_prediction, uses
 from .dynamics import factor_residual, has_series_factor, within_resonance
 
 __all__ = ["disturbance_finding"]
@@ -28,15 +29,15 @@ def _in_sweep(residual: np.ndarray, frequency: float, fs: float) -> bool:
     return level > 5.0 * np.std(residual - fitted) * np.sqrt(4.0 / residual.size)
 
 
+@uses("noise-prediction", "session-lines")
 def disturbance_finding(ctx: DiagnosisContext) -> dict:
-    model = ctx.model
     body_start = int(round(ctx.transient_s * ctx.fs))
     # What a significant series factor leaves: a lightly damped mode the model lacks rings like a line.
     prediction = noise_prediction(ctx)
     residual = factor_residual(ctx, ctx.noise.y - prediction, prediction)[body_start:]
     u = ctx.noise.u[body_start:]
-    peaks = [line for line in find_lines(residual, u, ctx.fs, IDENTIFICATION_BAND, known=model.disturbance_frequencies or ())
-             if not within_resonance(ctx, line[0])]
+    # The noise recording's lines, searched first (with the model's lines known) by the session's search.
+    peaks = [line for line in ctx.value("session-lines").found[0] if not within_resonance(ctx, line[0])]
     # A mode the model lacks or misplaces rings like a line in the residual, but the input explains it.
     candidates = [line for line, by_input in zip(peaks, driven(residual, u, ctx.fs, [p[0] for p in peaks])) if not by_input]
     first = int(round(SKIP_S * ctx.fs))

@@ -40,7 +40,7 @@ import scipy.signal
 from .. import structures
 from ..thresholds import EXCESS, EXPLAINS_GAIN
 from ..validation import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins",
            "sweep_bins", "FactorFit", "fit_factor", "FAMILIES", "series_factor_finding", "has_series_factor"]
@@ -80,9 +80,13 @@ class SweepBins:
 
 
 def sweep_bins(ctx: DiagnosisContext, band=VALIDATION_BAND) -> SweepBins:
-    """The comparison's sweeps as DFT bins (after the first ``SKIP_S``), cached on the context."""
-    if "sweep_bins" in ctx.cache:
-        return ctx.cache["sweep_bins"]
+    """The comparison's sweeps as DFT bins (after the first ``SKIP_S``) in ``band`` (Hz); in the
+    validation band, the shared value ``sweep-bins`` (computed once per context)."""
+    return ctx.value("sweep-bins") if tuple(band) == tuple(VALIDATION_BAND) else _sweep_bins(ctx, band)
+
+
+@provider("sweep-bins")
+def _sweep_bins(ctx: DiagnosisContext, band=VALIDATION_BAND) -> SweepBins:
     first = int(round(SKIP_S * ctx.fs))
     spectra = []
     for entry, sweep in zip(ctx.comparison.per_sweep, ctx.sweeps):
@@ -93,9 +97,7 @@ def sweep_bins(ctx: DiagnosisContext, band=VALIDATION_BAND) -> SweepBins:
         f = np.fft.rfftfreq(p.size, 1 / ctx.fs)
         inside = (f >= band[0]) & (f <= band[1])
         spectra.append(SweepSpectrum(f[inside], np.fft.rfft(p)[inside], np.fft.rfft(y)[inside], p.size, ctx.fs))
-    bins = SweepBins(spectra, CompressedValidation(spectra, CELL_HZ), ctx.fs)
-    ctx.cache["sweep_bins"] = bins
-    return bins
+    return SweepBins(spectra, CompressedValidation(spectra, CELL_HZ), ctx.fs)
 
 
 def factor_response(family: str, params: dict, frequencies, fs: float) -> np.ndarray:
@@ -212,6 +214,7 @@ def _explain(fit: FactorFit, gain: float, fs: float) -> tuple[str, str]:
     return explanation, remedy
 
 
+@uses("sweep-bins")
 def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
     """One finding per family of series factors; at most one of them significant."""
     if ctx.excess < EXCESS:

@@ -25,7 +25,7 @@ import scipy.signal
 from ..recordings import Recording
 from ..thresholds import AT_FLOOR
 from ..validation import VALIDATION_BAND, noise_floor
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, uses
 
 __all__ = ["input_noise_finding", "input_noise_density", "input_noise_error", "bound_ratio", "bound_share"]
 
@@ -71,11 +71,21 @@ def bound_share(bound: float, excess: float) -> float:
     return 1.0 if excess <= bound else float((bound**2 - 1.0) / (excess**2 - 1.0))
 
 
-def _coherence_snr_db(ctx: DiagnosisContext) -> float:
-    """Median input SNR (dB) in ``BIAS_BAND`` from the coherence of the noise recording (module docstring)."""
-    body = ctx.body
-    f, coherence = scipy.signal.coherence(body.u, body.y, ctx.fs, nperseg=2205)
-    _, s_yy = scipy.signal.welch(body.y - body.y.mean(), ctx.fs, nperseg=2205)
+def _welch_spectra(body: Recording) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(f Hz, S_uu, S_yy, S_uy) of the noise recording's body: Welch densities (FS^2/Hz), 2205-sample
+    Hann segments; each once (``scipy.signal.coherence`` computed S_uu and S_yy again)."""
+    f, s_uu = scipy.signal.welch(body.u, body.fs, nperseg=2205)
+    _, s_yy = scipy.signal.welch(body.y, body.fs, nperseg=2205)
+    _, s_uy = scipy.signal.csd(body.u, body.y, body.fs, nperseg=2205)
+    return f, s_uu, s_yy, s_uy
+
+
+def _coherence_snr_db(ctx: DiagnosisContext, spectra=None) -> float:
+    """Median input SNR (dB) in ``BIAS_BAND`` from the coherence of the noise recording (module docstring);
+    ``spectra``: its ``_welch_spectra`` when computed already."""
+    f, s_uu, s_yy, s_uy = spectra or _welch_spectra(ctx.body)
+    # scipy.signal.coherence: |S_uy|^2 / (S_uu S_yy) (each segment detrended, so the means do not count).
+    coherence = np.abs(s_uy) ** 2 / (s_uu * s_yy)
     ear_noise = ctx.comparison.noise_floor**2 / (VALIDATION_BAND[1] - VALIDATION_BAND[0])
     inside = (f >= BIAS_BAND[0]) & (f <= BIAS_BAND[1])
     ear_part = np.maximum(s_yy[inside] - ear_noise, 1e-30) / s_yy[inside]
@@ -84,10 +94,11 @@ def _coherence_snr_db(ctx: DiagnosisContext) -> float:
     return float(10 * np.log10(np.median(share / (1 - share))))
 
 
+@uses()
 def input_noise_finding(ctx: DiagnosisContext) -> dict:
     density = input_noise_density(ctx.sweeps)
-    body = ctx.body
-    f, s_uu = scipy.signal.welch(body.u - body.u.mean(), ctx.fs, nperseg=2205)
+    spectra = _welch_spectra(ctx.body)
+    f, s_uu = spectra[:2]
     inside = (f >= BIAS_BAND[0]) & (f <= BIAS_BAND[1])
     snr = np.maximum(s_uu[inside] - density, 1e-30) / max(density, 1e-30)
     bias = 10 * np.log10(1 + 1 / snr)
@@ -122,5 +133,5 @@ def input_noise_finding(ctx: DiagnosisContext) -> dict:
                    {"input_snr_db": snr_db, "bias_db": median_bias, "input_noise_density": density,
                     "bound_ratio": bound},
                    explanation, remedy,
-                   {"input_snr_coherence_db": _coherence_snr_db(ctx), "input_noise_error_fs": error,
+                   {"input_snr_coherence_db": _coherence_snr_db(ctx, spectra), "input_noise_error_fs": error,
                     "bounds_the_error": bounds})

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.signal
 
 from ..validation import SKIP_S, VALIDATION_BAND
-from . import DiagnosisContext, finding, linear_part
+from . import DiagnosisContext, finding, linear_part, uses
 from .dynamics import has_series_factor, with_series_factor
 
 __all__ = ["nonlinearity_finding", "polynomial_columns"]
@@ -43,6 +43,7 @@ def polynomial_columns(model, u: np.ndarray, degree: int = 3, prediction: np.nda
     return np.stack(columns, axis=1)
 
 
+@uses()
 def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     first = int(round(SKIP_S * ctx.fs))
     rows, targets = [], []

@@ -17,7 +17,7 @@ from ..compare import Comparison
 from ..structures import mode_block, with_states
 from ..thresholds import EXCESS, EXPLAINS_GAIN, UNDER_MODELLED_EXCESS
 from ..validation import VALIDATION_BAND
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, uses
 from .delay import refit_rms
 
 __all__ = ["under_modelled_finding", "worst_bands", "START_Q"]
@@ -34,6 +34,7 @@ def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
     return sorted(rows, key=lambda r: -r["ratio"])[:count]
 
 
+@uses("delay-scan-data", "delay-sweep-spectra")
 def under_modelled_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     # An offset (at DC) or a change between recordings explains no in-band error of the model.

@@ -24,7 +24,7 @@ from ..data_quality import clipped_samples
 from ..lines import without_lines
 from ..thresholds import EXCESS, IDENTIFICATION_BAND
 from ..validation import SKIP_S, VALIDATION_BAND
-from . import DiagnosisContext, finding
+from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding", "recording_change",
            "recording_levels"]
@@ -43,9 +43,13 @@ CHANGE_T = 6.0
 
 
 def segment_responses(ctx: DiagnosisContext):
-    """(frequencies, H1 per segment [S x F], coherence per segment, segment centres in samples)."""
-    if "segments" in ctx.cache:
-        return ctx.cache["segments"]
+    """(frequencies, H1 per segment [S x F], coherence per segment, segment centres in samples): the
+    shared value ``segments``."""
+    return ctx.value("segments")
+
+
+@provider("segments")
+def _segment_responses(ctx: DiagnosisContext):
     # Without the lines the model knows (``lines.without_lines``): a hum is no response to the input, and
     # on a quiet noise recording it moves the segments' H1 below 300 Hz (random helmet 100 FF, 60 Hz at
     # 9.9e-4 FS under an ear signal of 0.024 FS peak: noise vs sweeps 0.52 dB with it, 0.08 dB without).
@@ -61,11 +65,10 @@ def segment_responses(ctx: DiagnosisContext):
         responses.append(s_uy / s_uu)
         coherences.append(np.abs(s_uy) ** 2 / (s_uu * s_yy))
         centres.append((k + 0.5) * length)
-    result = (f, np.array(responses), np.array(coherences), np.array(centres))
-    ctx.cache["segments"] = result
-    return result
+    return f, np.array(responses), np.array(coherences), np.array(centres)
 
 
+@uses("segments")
 def clock_drift_finding(ctx: DiagnosisContext) -> dict:
     f, H, coherence, centres = segment_responses(ctx)
     use = (f >= 20.0) & (f <= 2000.0) & np.all(coherence > 0.9, axis=0)
@@ -193,6 +196,7 @@ def recording_change(ctx: DiagnosisContext) -> dict:
             "pairs": {f"{a} vs {b}": round(v, 3) for (a, b), (v, _) in pairs.items()}}
 
 
+@uses("segments")
 def time_variation_finding(ctx: DiagnosisContext) -> dict:
     """The path changing inside the noise recording, or between recordings (``recording_change``)."""
     across = recording_change(ctx)
