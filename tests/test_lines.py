@@ -41,3 +41,21 @@ def test_a_mode_is_driven_and_a_line_is_not():
     assert len(peaks) == 2 and peaks[0] == pytest.approx(60.0, abs=0.1) and peaks[1] == pytest.approx(130.0, abs=0.5)
     assert driven(x, u, fs, peaks) == [False, True]
     assert driven(x, u, fs, []) == []
+
+
+@pytest.mark.parametrize("frequencies", [[50.0], [41.7, 83.4, 125.1], [50.0, 50.0]])
+def test_the_blocked_fit_is_the_least_squares_fit(frequencies):
+    # fit_sinusoids sums the normal equations block by block from rotated exponentials; the fit is the
+    # plain least-squares fit on the whole regressor (coinciding lines included), with a mask too.
+    from sysid.lines import FIT_BLOCK, line_regressor
+
+    rng = np.random.default_rng(7)
+    fs, n = 48000.0, 3 * FIT_BLOCK + 123
+    t = np.arange(n) / fs
+    x = 1e-3 * np.cos(2 * np.pi * 50.03 * t + 0.4) + 3e-4 * np.sin(2 * np.pi * 125.0 * t) + 1e-3 * rng.standard_normal(n)
+    keep = rng.random(n) > 0.2
+    for mask in (None, keep):
+        regressor = line_regressor(n, frequencies, fs)
+        rows = regressor if mask is None else regressor[mask]
+        theta = np.linalg.lstsq(rows, x if mask is None else x[mask], rcond=None)[0]
+        np.testing.assert_allclose(fit_sinusoids(x, frequencies, fs, keep=mask), regressor @ theta, rtol=0, atol=1e-12)
