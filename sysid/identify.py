@@ -16,8 +16,10 @@
    circle (``_settle``).
 5. The onset's delay errs short by the smoothing kernel's lead (and long on a slowly
    rising response); the picked model's poles say by how much (``latency.refine_delay``),
-   and the samples its core spent imitating delay move into the delay line (or back out
-   of it) before the final refinement.
+   read short, its core refitted one sample at a time settles it (``latency.walk_delay``:
+   the largest delay whose refit costs within the noise of the best), and the samples its
+   core spent imitating delay move into the delay line (or back out of it) before the
+   final refinement.
 
 Every model leaves balanced (``lti.balanced_realisation``): entries of order one,
 whatever the coordinates the subspace or output-error fit produced.
@@ -35,7 +37,7 @@ from threadpoolctl import threadpool_limits
 from . import lti
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay
+from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay, walk_delay
 from .lines import undriven_lines, without_lines
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
@@ -185,8 +187,10 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     result_model, refined_rms, scan = seed_model, None, []
     if options.refine:
         t0 = time.perf_counter()
+        # The band-limited kernel's lead (samples): how far short the onset may have read (latency module docstring).
+        lead = int(np.ceil(fs / (2 * latency.top_hz))) if latency else 0
         result_model, refined_rms, scan, extra = _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor,
-                                                         options, provenance, progress)
+                                                         options, provenance, progress, lead)
         seconds["refinement"] = time.perf_counter() - t0
         if extra is not None and refined_rms < seed_rms:
             # The model moved ``extra`` samples of its core into the delay line (latency.refine_delay).
@@ -279,7 +283,7 @@ def _settle(pick: OrderCandidate, pick_rms: float, block, sweep_spectra, time_rm
     return best, best_rms
 
 
-def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress):
+def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress, lead=0):
     scan_block = block_data(body, options.band, options.scan_seconds)
     # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
     orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
@@ -305,6 +309,14 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
         # picked core's poles say by how much.
         extra, _ = refine_delay(pick.A, body, options.band, options.scan_seconds, feedthrough=options.feedthrough,
                                 delay=delay)
+        walked = None
+        if extra >= 0:
+            # Read short (or right), the refitted costs settle it: the largest delay within the noise, walked
+            # one sample at a time from the fixed poles' answer (latency.walk_delay); read long, refine_delay's
+            # refitted costs decided already.
+            walked = walk_delay(pick.A, body, options.band, options.scan_seconds, extra, feedthrough=options.feedthrough,
+                                lead=lead)
+            extra = walked.extra
         if extra:
             longer = compensate_delay(body, extra)
             longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
@@ -315,7 +327,9 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             moved, moved_rms = None, np.inf
             # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
             # _FREED_ORDERS poles, one at a time, below.
-            starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
+            # The pick's refit starts from the walk's poles at that delay (refine_output_error uses only the poles).
+            starts = [(_FREED_ORDERS if c is pick else 0, c.start, walked.A if c is pick and walked else c.A, c.B, c.C,
+                       c.D, c.reflected)
                       for c in [pick, *[c for c in candidates if pick.order - _FREED_ORDERS <= c.order < pick.order]]]
             while starts:
                 drops, label, A0, B0, C0, D0, reflected = starts.pop(0)
