@@ -34,6 +34,8 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
+from threadpoolctl import threadpool_limits
+
 from . import effects as registry
 from .compare import compare
 from .corrections import corrected
@@ -88,20 +90,25 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
     model.check_stable()
     if noise.duration <= transient_s + 0.5:
         raise IdentificationError(f"{noise.path}: shorter than the {transient_s:g} s transient plus 0.5 s")
-    comparison = comparison or compare(model, sweeps)
-    # The detectors see the recordings as the model does: the ear clock resampled by its clock_ratio.
-    noise = corrected(noise, model.clock_ratio)
-    sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
-    ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
-    findings = ctx.findings
-    for detector in registry.detector_order():
-        # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
-        ctx.readable = getattr(detector, "uses", None)
-        try:
-            found = detector(ctx)
-        finally:
-            ctx.readable = None
-        findings.extend(found if isinstance(found, list) else [found])
+    # One BLAS thread: the products here are small or vectors (the comparison's correlations are dot
+    # products over a sweep), where a second thread gains little, and on a shared machine OpenBLAS's
+    # threads wait for each other: the comparison's 150 dot products took 0.5-0.8 s of CPU and more of
+    # wall time at a load of 7, against 0.01 s with one thread.
+    with threadpool_limits(limits=1, user_api="blas"):
+        comparison = comparison or compare(model, sweeps)
+        # The detectors see the recordings as the model does: the ear clock resampled by its clock_ratio.
+        noise = corrected(noise, model.clock_ratio)
+        sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
+        ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
+        findings = ctx.findings
+        for detector in registry.detector_order():
+            # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
+            ctx.readable = getattr(detector, "uses", None)
+            try:
+                found = detector(ctx)
+            finally:
+                ctx.readable = None
+            findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))
     findings[:] = _leading_first(findings)
     return Diagnosis(findings, comparison, time.perf_counter() - t0)
