@@ -56,6 +56,8 @@ __all__ = ["IdentificationOptions", "Identification", "identify"]
 _FREED_ORDERS = 2
 # Out-of-band poles dropped at most from a pick whose simulation disagrees with the sweeps' spectra (_settle).
 _SETTLE_DROPS = 4
+# Delays walked to (latency.walk_delay) tried at most on the sweeps, longest first.
+_DELAY_TRIES = 3
 
 
 @dataclass(frozen=True)
@@ -317,7 +319,11 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             walked = walk_delay(pick.A, body, options.band, options.scan_seconds, extra, feedthrough=options.feedthrough,
                                 lead=lead)
             extra = walked.extra
-        if extra:
+        # The walk's answer first; a trial the sweeps reject (a freed pole run toward z = 1 rings in the simulated
+        # sweeps: random helmet 2, short, one sample past the true delay at 84x) the next shorter delays it visited.
+        tries = [extra] if walked is None else [j for j in sorted(walked.fits, reverse=True) if 0 < j <= extra]
+        moved_by = 0
+        for extra in tries[:_DELAY_TRIES] if extra else []:
             longer = compensate_delay(body, extra)
             longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
             # The same poles behind the longer delay, refitted on the scan block (numerator and poles); and the
@@ -327,10 +333,13 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             moved, moved_rms = None, np.inf
             # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
             # _FREED_ORDERS poles, one at a time, below.
-            # The pick's refit starts from the walk's poles at that delay (refine_output_error uses only the poles).
-            starts = [(_FREED_ORDERS if c is pick else 0, c.start, walked.A if c is pick and walked else c.A, c.B, c.C,
-                       c.D, c.reflected)
+            starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
                       for c in [pick, *[c for c in candidates if pick.order - _FREED_ORDERS <= c.order < pick.order]]]
+            if walked is not None:
+                # And from the walk's poles at that delay (refine_output_error uses only the poles): refitted there
+                # from the neighbouring delay's, they may sit in another minimum than the pick's own refit reaches.
+                starts.insert(1, (0, pick.start + ", walked", walked.fits[extra].A, pick.B, pick.C, pick.D,
+                                  pick.reflected))
             while starts:
                 drops, label, A0, B0, C0, D0, reflected = starts.pop(0)
                 fit = refine_output_error(A0, B0, C0, D0, scan_longer, feedthrough=options.feedthrough, max_iterations=20,
@@ -355,8 +364,9 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
                                        np.zeros((poles.size, 1)), np.zeros((1, poles.size)), np.zeros((1, 1)), reflected))
             if moved is not None and moved_rms <= pick_rms * (1 + options.min_gain):
                 body, delay, sweep_spectra, pick, pick_rms = longer, delay + extra, longer_sweeps, moved, moved_rms
-            else:  # the sweeps disagree: keep the onset's delay
-                extra = 0
+                moved_by = extra
+                break
+        extra = moved_by  # 0 when the sweeps disagree with every try: the onset's delay stays
     block = block_data(body, options.band, options.refine_seconds)
     # Stopped once an iteration gains less than the noise can tell (output_error's noise_tolerance, as every
     # refinement here): the pick sits near the long block's minimum, and MINPACK's default tolerance crawled

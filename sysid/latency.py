@@ -83,7 +83,7 @@ recording), 27. At the final model's poles every one of these recordings reads 2
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -299,11 +299,13 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
 @dataclass(frozen=True)
 class DelayWalk:
     """What ``walk_delay`` found: samples to add to the delay, the refitted core's poles there (A, real
-    block diagonal or balanced), and the refitted cost V at each delay it visited (samples -> cost)."""
+    block diagonal or balanced), the refitted cost V at each delay it visited (samples -> cost) and the
+    refitted cores (samples -> ``output_error.OutputErrorFit``)."""
 
     extra: int
     A: np.ndarray
     costs: dict[int, float]
+    fits: dict = field(default_factory=dict)
 
 
 def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, start: int, feedthrough: bool = False,
@@ -363,4 +365,4 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     costs = {j: f.cost_after for j, f in sorted(fits.items())}
     smallest = min(costs.values())
     extra = max(j for j, c in costs.items() if c <= smallest * tolerance)
-    return DelayWalk(extra, fits[extra].A, costs)
+    return DelayWalk(extra, fits[extra].A, costs, fits)
