@@ -14,7 +14,8 @@ clean sessions the false-alarm rate (any significant finding). Prints Markdown.
 (its default refit grid, ``sysid.refine.REFIT_OPTIONS``) on N thesis-length sessions (20 s noise,
 5 s sweeps) of random helmets with one to three hidden effects, the model identified on each session;
 prints the median and worst CPU and wall time (targets: refine --auto median <= 30 s, worst <= 60 s;
-diagnose <= 2 s).
+diagnose <= 2 s), and per session diagnose's CPU time by part (the comparison and each detector,
+``Diagnosis.cpu_seconds``).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def run_session(path: str, seed: int, effects: list[str], changes: dict) -> dict
 
 def timing(count: int) -> None:
     """CPU and wall time of diagnose and refine --auto (default refit grid) on thesis-length sessions."""
-    rows, diag, auto = [], [], []
+    rows, diag, auto, parts = [], [], [], []
     for k in range(count):
         rng = np.random.default_rng([k, 11])
         path = ("fb", "ff")[k % 2]
@@ -78,6 +79,8 @@ def timing(count: int) -> None:
         c0, t0 = time.process_time(), time.perf_counter()
         findings = diagnose(model, session.noise, session.sweeps)
         diag.append((time.process_time() - c0, time.perf_counter() - t0))
+        parts.append(f"{path} {300 + k}: " + ", ".join(f"{name.removesuffix('_finding').removesuffix('_findings')} {t:.2f}"
+                                                      for name, t in findings.cpu_seconds.items()))
         c0, t0 = time.process_time(), time.perf_counter()
         result = refine_auto(model, session.noise, session.sweeps)
         auto.append((time.process_time() - c0, time.perf_counter() - t0))
@@ -93,7 +96,9 @@ def timing(count: int) -> None:
         cpu, wall = np.array([a[0] for a in auto]), np.array([a[1] for a in auto])
         print(f"\nrefine --auto CPU median {np.median(cpu):.1f} s, worst {cpu.max():.1f} s; wall median "
               f"{np.median(wall):.1f} s, worst {wall.max():.1f} s; diagnose CPU median "
-              f"{np.median([d[0] for d in diag]):.2f} s, worst {max(d[0] for d in diag):.2f} s ({len(auto)} sessions)")
+              f"{np.median([d[0] for d in diag]):.2f} s, worst {max(d[0] for d in diag):.2f} s, wall median "
+              f"{np.median([d[1] for d in diag]):.2f} s, worst {max(d[1] for d in diag):.2f} s ({len(auto)} sessions)")
+        print("\ndiagnose CPU by part (s):\n" + "\n".join(f"- {line}" for line in parts))
 
 
 def error_of(kind, value, truth):

@@ -64,12 +64,15 @@ DETECTORS = _Detectors()
 
 
 class Diagnosis(list):
-    """The ranked findings (``Finding`` records) with the comparison they were based on."""
+    """The ranked findings (``Finding`` records) with the comparison they were based on; ``seconds``
+    the wall time of ``diagnose``, ``cpu_seconds`` the CPU time (s) of the comparison and of each
+    detector by name, the shared values counted where first read."""
 
-    def __init__(self, findings, comparison, seconds: float):
+    def __init__(self, findings, comparison, seconds: float, cpu_seconds: dict | None = None):
         super().__init__(findings)
         self.comparison = comparison
         self.seconds = seconds
+        self.cpu_seconds = cpu_seconds or {}
 
     @property
     def significant(self) -> list[Finding]:
@@ -95,7 +98,9 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
     # threads wait for each other: the comparison's 150 dot products took 0.5-0.8 s of CPU and more of
     # wall time at a load of 7, against 0.01 s with one thread.
     with threadpool_limits(limits=1, user_api="blas"):
+        clock = time.process_time()
         comparison = comparison or compare(model, sweeps)
+        cpu_seconds = {"compare": time.process_time() - clock}
         # The detectors see the recordings as the model does: the ear clock resampled by its clock_ratio.
         noise = corrected(noise, model.clock_ratio)
         sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
@@ -104,14 +109,16 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         for detector in registry.detector_order():
             # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
             ctx.readable = getattr(detector, "uses", None)
+            clock = time.process_time()
             try:
                 found = detector(ctx)
             finally:
                 ctx.readable = None
+            cpu_seconds[getattr(detector, "__name__", str(detector))] = time.process_time() - clock
             findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))
     findings[:] = _leading_first(findings)
-    return Diagnosis(findings, comparison, time.perf_counter() - t0)
+    return Diagnosis(findings, comparison, time.perf_counter() - t0, cpu_seconds)
 
 
 def _leading_first(findings: list[Finding]) -> list[Finding]:
