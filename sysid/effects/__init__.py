@@ -44,7 +44,10 @@ class Effect:
     ``detect(ctx)`` returns one finding or a list (one detector may judge several
     effects, e.g. the series factors' family fit); ``needs`` names the effects
     whose findings it reads from ``ctx.findings`` (they run first); ``needs_all``:
-    it reads every other finding (under-modelled, asked last). ``build(model, noise,
+    it reads every other finding (under-modelled, asked last). The values the detector
+    shares with others (the session's line search, the noise recording's prediction: each
+    computed once per diagnosis by a named provider) it declares itself with
+    ``sysid.findings.uses``; ``diagnose`` lets it read only those. ``build(model, noise,
     sweeps, params, options, transient_s) -> (model, extra params)`` adds the
     structure or correction; ``complete(params, ctx, before) -> params`` fills parameters
     ``refine --add`` left at None from the data; ``accept``: how ``refine --auto`` judges
