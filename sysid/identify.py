@@ -317,7 +317,7 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             # one sample at a time from the fixed poles' answer (latency.walk_delay); read long, refine_delay's
             # refitted costs decided already.
             walked = walk_delay(pick.A, body, options.band, options.scan_seconds, extra, feedthrough=options.feedthrough,
-                                lead=lead)
+                                lead=lead, long_seconds=options.refine_seconds)
             extra = walked.extra
         # The walk's answer first; a trial the sweeps reject (a freed pole run toward z = 1 rings in the simulated
         # sweeps: random helmet 2, short, one sample past the true delay at 84x) the next shorter delays it visited.
