@@ -31,7 +31,9 @@ Each builder ``add_X(model, noise, sweeps, params, options, transient_s)`` retur
   the last two, a refit. ``correct_data`` applies several corrections and then refits once:
   the core identified anew on the corrected data (every order, the latency again: the order
   and delay chosen on clipped or drifting data are no bound). Excluded stretches are filled
-  with the prediction of the model before (``_prepared``), in passes (EM).
+  with the prediction of the model before (``_prepared``), in passes (EM); where the noise
+  recording itself has excluded stretches, the core is then refined with them out of the
+  output-error cost (``_gap_aware``, ``sysid.masked_output_error``).
 
 Every other re-identification fits the core behind the model's own delay and input map, and
 runs only when the warm start (``_warm``: the current core, its order, poles and zeros, refined
@@ -53,7 +55,9 @@ from .findings.data_quality import clipped_stretches_of, session_lines
 from .findings.nonlinearity import nonlinearity_finding
 from .findings.under_modelled import START_Q, worst_bands
 from .identify import IdentificationOptions, identify
+from . import lti
 from .lines import fit_sinusoids
+from .masked_output_error import refine_masked
 from .model import Model
 from .output_error import BlockData, block_data, refine_output_error
 from .recordings import Recording
@@ -410,7 +414,9 @@ def _corrected_refit(trial: Model, noise, sweeps, options, transient_s) -> Model
     or the error is at the floor. The first fill is the warm start's: the trial's core was fitted on
     the uncorrected data (a drifting clock, say) and its prediction misleads the fresh fit's ranking
     on the sweeps (the README's rig: 76x the floor at order 15 after three passes from the trial's
-    fill, 1.03x at order 5 from the warm start's). The best of all is returned.
+    fill, 1.03x at order 5 from the warm start's). The best of all is returned, after a refit of its
+    core with the noise recording's excluded samples out of the cost (``_gap_aware``) when that
+    validates better.
     """
     scored = [(compare(t, sweeps), t) for t in (trial, _warm(trial, noise, options, transient_s)) if t.stable]
     best_after, best = min(scored, key=lambda pair: pair[0].rms)
@@ -428,7 +434,43 @@ def _corrected_refit(trial: Model, noise, sweeps, options, transient_s) -> Model
         best, best_after = refit, after
         if after.ratio <= AT_FLOOR:
             break
+    if best_after.ratio > WARM_ENOUGH:
+        # The fills above hold the last model's prediction; where the noise recording itself has gaps,
+        # its core refitted with the gaps out of the cost instead (``_gap_aware``), kept if it validates better.
+        polished = _gap_aware(best, noise, options, transient_s)
+        if polished is not None and polished.stable and compare(polished, sweeps).rms < best_after.rms:
+            best = polished
     return best
+
+
+def _gap_aware(model: Model, noise: Recording, options, transient_s) -> Model | None:
+    """The model's core refined by output error over the kept samples of its noise recording
+    (``sysid.masked_output_error``: the excluded stretches out of the cost, not filled with a
+    prediction), on the first ``refine_seconds`` after the transient; None when the noise recording
+    has no excluded stretch.
+
+    The fill of ``_prepared`` is the E step of EM for missing data, and each pass of
+    ``_corrected_refit`` an M step: EM converges at the rate of the missing information, and a
+    clipped noise recording misses its loudest samples, a margin around each (a noise recording
+    clipped at 2 % of its samples, random helmet 101 FB: 2.3 % to 63 % excluded by margins of 0 to 2 ms,
+    the filled refit 1.18x to 6.7x the floor against 1.06x unclipped).
+    """
+    recording = corrected(noise, model.clock_ratio)
+    mask = excluded_mask(recording, model.excluded)
+    if not mask.any():
+        return None
+    first = int(round(transient_s * recording.fs))
+    stop = min(first + int(round((options or REFIT_OPTIONS).refine_seconds * recording.fs)), recording.u.size)
+    keep = ~mask
+    # The lines fitted where the ear signal counts; the states run from the recording's first sample (at rest).
+    y = recording.y - model.output_offset - _disturbance(model, recording, model.disturbance_frequencies, keep)
+    keep = keep[:stop].copy()
+    keep[:first] = False
+    if np.count_nonzero(keep) < 10 * (model.order + 1):
+        return None
+    fit = refine_masked(model.A, _plain_input(model)(recording.u)[:stop], y[:stop], keep,
+                        feedthrough=bool(model.D[0, 0]))
+    return _with(model, lti.balanced_realisation(fit.A, fit.B, fit.C, fit.D))
 
 
 def with_clock_drift(model, noise, sweeps, params):
