@@ -13,6 +13,9 @@ little gain stops on a plateau of them. Here every order n = 1..n_max is tried
   poles plus a real pole, or plus a lightly damped pair at the frequency where that
   model's residual relative to the input is largest.
 
+No start holds two coinciding poles or a pole at the block's radius bound: such poles are
+replaced by distinct real poles where the fixed-pole cost wants them (``distinct_start``).
+
 Every start is screened by the output-error cost with its poles held fixed (one linear
 least-squares solve), the best few are refined (``output_error``, stopped once an iteration
 gains less than the noise can tell: ``noise_tolerance``) and ranked by the validation rms on
@@ -39,12 +42,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lti
-from .output_error import BlockData, added_pole_costs, linear_cost, refine_output_error, residual_spectrum
+from .output_error import (BlockData, added_pole_costs, linear_cost, radius_bound_mask, refine_output_error,
+                           residual_spectrum)
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
 from .thresholds import AT_FLOOR
 from .validation import SweepSpectrum, band_energy, rms_from_responses
 
-__all__ = ["OrderCandidate", "search_orders", "START_GAMMAS"]
+__all__ = ["OrderCandidate", "search_orders", "distinct_start", "START_GAMMAS"]
 
 # Smoothing widths whose subspace models start every order, besides the grid's best of that order.
 START_GAMMAS = (30, 100, 300)
@@ -62,6 +66,14 @@ _INSERT_FREQUENCIES = 40
 _INSERT_Q = (3.0, 20.0)
 _INSERT_REFINED = 3
 _INSERT_ROUNDS = 3
+# Real poles a start may take for a pole it adds or replaces (``distinct_start``), the usual added
+# pole 0.5 first: roll-off corners (a real pole exp(-2 pi f_c / f_s) is 0.07-0.88 for 1-20 kHz at
+# 48 kHz), coupling high-pass corners near z = 1, and negative poles for what lies near Nyquist.
+_REAL_POLES = (0.5, 0.3, 0.7, 0.1, 0.85, -0.3, 0.93, 0.97, -0.7, 0.99)
+# Distance below which two poles of a start coincide (``distinct_start``), and the least distance of
+# a placed real pole from every other pole of the start.
+_COINCIDE = 1e-6
+_SEPARATION = 1e-2
 # A block residual within this many standard deviations of the noise energy the floor predicts
 # is at the block's noise level (``block_at_noise``).
 _NOISE_SIGMAS = 3.0
@@ -126,6 +138,60 @@ def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np
     width = max(1, block.z.size // 100)
     smoothed = np.convolve(relative, np.ones(width) / width, mode="same")
     return _pair(float(np.angle(block.z[int(np.argmax(smoothed))])), _NEW_MODE_Q)
+
+
+def distinct_start(poles: np.ndarray, block: BlockData, feedthrough: bool, added: int = 0) -> np.ndarray:
+    """The starting poles with every degenerate pole replaced by a real pole placed where the
+    output-error cost wants it; ``added`` real poles more placed the same way.
+
+    A pole is degenerate when it coincides (within _COINCIDE) with an earlier one, or sits at the
+    block's radius bound (``output_error.radius_bound_mask``). Two coinciding poles give two
+    identical regressor columns: the least squares is rank deficient (only their sum is fitted), and
+    the two poles move apart only through the second-order terms of the iteration. A pole at the
+    bound is one the block could not hold, run out to z = +-1, where it adds a smooth term in band
+    and rings out of it; refined again it stays there. Both came from the scan's own chain: the real
+    pole added at 0.5 beside a 0.5 the previous order kept, two poles at z = 0 from a rank-deficient
+    shift-property solve, and spare poles run to the bound, inherited by every later ``order n-1 +
+    real pole`` start (random helmet 41, short session: four real poles at z = -0.99998 from order
+    14 on; 331 of its 820 factorisations ill-conditioned, 248 of them split for dependent columns;
+    255 and 38 of 861 with these starts). Each replacement is the real pole of _REAL_POLES, at least
+    _SEPARATION from every pole kept so far, whose fixed-pole cost (``output_error.added_pole_costs``:
+    the kept poles' columns factored once) is lowest: distinct by construction, and where the kept
+    poles' residual asks for a real pole. An added pole goes at 0.5, the scan's usual choice, unless
+    a kept pole lies within _SEPARATION of it; then it is placed as a replacement is. (Placing every
+    added pole by its cost put 7 more of the first 43 short random helmets outside issue 10's
+    criteria, 6 of them by the delay the pipeline then settled on, 3 to 4 samples off.) A start with nothing degenerate is returned as given, plus the
+    added poles.
+
+    For a model that fits in band with poles at z = -1 a too long delay is the usual cause, not the
+    start: a causal core cannot imitate an advance, and poles near z = -1 with large cancelling
+    residues do it in band only (helmet 41, short: the delay read 12 for the true 10; with 10 the
+    search reaches 1.005x at n 18 in 3.5 s of CPU).
+    """
+    poles = np.asarray(poles, dtype=complex)
+    # Real poles as lti.real_block_diagonal tells them; a pair is kept or replaced whole, by its upper pole.
+    real = np.abs(poles.imag) < 1e-12 * np.maximum(1.0, np.abs(poles))
+    at_bound = radius_bound_mask(poles, block)
+    placed: list[complex] = []
+    for p, is_real, bound in zip(poles, real, at_bound):
+        if not is_real and p.imag < 0:
+            continue
+        members = [complex(p.real)] if is_real else [p, np.conj(p)]
+        # A pair whose two poles coincide (a double real pole split by round-off) is degenerate too.
+        coincide = (not is_real and p.imag <= _COINCIDE / 2) or (
+            bool(placed) and min(np.min(np.abs(np.array(placed) - m)) for m in members) <= _COINCIDE)
+        if not bound and not coincide:
+            placed += members
+    replaced = poles.size - len(placed)
+    for k in range(replaced + added):
+        candidates = [r for r in _REAL_POLES if not placed or np.min(np.abs(np.array(placed) - r)) >= _SEPARATION]
+        if not placed or (k >= replaced and candidates[0] == _REAL_POLES[0]):
+            placed.append(complex(candidates[0]))
+            continue
+        costs = added_pole_costs(lti.real_block_diagonal(np.array(placed)), [np.array([r]) for r in candidates],
+                                 block, feedthrough=feedthrough)
+        placed.append(complex(candidates[int(np.argmin(costs))]))
+    return np.array(placed)
 
 
 def _pair(omega: float, q: float) -> np.ndarray:
@@ -209,15 +275,16 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
                 continue
             A, _ = decomposition.observability(n)
             poles, moved = reflect_unstable(np.linalg.eigvals(A))
-            starts.append((f"grid gamma={gamma}", poles, moved))
+            starts.append((f"grid gamma={gamma}", distinct_start(poles, block, feedthrough), moved))
         poles, moved = reflect_unstable(raw[n])
-        starts.append(("raw subspace", poles, moved))
+        starts.append(("raw subspace", distinct_start(poles, block, feedthrough), moved))
         if n - 1 in best:
             previous = np.linalg.eigvals(best[n - 1].A)
-            starts.append((f"order {n - 1} + real pole", np.concatenate([previous, [0.5]]), 0))
+            starts.append((f"order {n - 1} + real pole", distinct_start(previous, block, feedthrough, added=1), 0))
         if n - 2 in best:
             previous = np.linalg.eigvals(best[n - 2].A)
-            starts.append((f"order {n - 2} + mode", np.concatenate([previous, _residual_mode(previous, block, feedthrough)]), 0))
+            starts.append((f"order {n - 2} + mode", distinct_start(np.concatenate(
+                [previous, _residual_mode(previous, block, feedthrough)]), block, feedthrough), 0))
         screened = []
         for label, poles, moved in starts:
             A = lti.real_block_diagonal(poles)

@@ -43,7 +43,7 @@ from .validation import rfft_pair
 _BLAS = ThreadpoolController()
 
 __all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
-           "residual_spectrum", "added_pole_costs", "decay_bound", "at_radius_bound"]
+           "residual_spectrum", "added_pole_costs", "decay_bound", "at_radius_bound", "radius_bound_mask"]
 
 
 @dataclass
@@ -123,14 +123,16 @@ def decay_bound(data: "BlockData") -> float:
     return 1.0 / data.length
 
 
-def at_radius_bound(poles: np.ndarray, data: "BlockData") -> bool:
-    """Whether any of ``poles`` sits at the block's ``decay_bound`` (decay within 1 % of it): a pole
+def radius_bound_mask(poles: np.ndarray, data: "BlockData") -> np.ndarray:
+    """Which of ``poles`` sit at the block's ``decay_bound`` (decay -ln|p| within 1 % of it): poles
     the block could not hold, run out to the limit of the parametrisation."""
-    poles = np.asarray(poles)
-    if poles.size == 0:
-        return False
-    decay = -np.log(np.maximum(np.abs(poles), 1e-300))
-    return bool(np.any(decay <= (1 + _AT_BOUND) * decay_bound(data)))
+    decay = -np.log(np.maximum(np.abs(np.asarray(poles)), 1e-300))
+    return decay <= (1 + _AT_BOUND) * decay_bound(data)
+
+
+def at_radius_bound(poles: np.ndarray, data: "BlockData") -> bool:
+    """Whether any of ``poles`` sits at the block's ``decay_bound`` (``radius_bound_mask``)."""
+    return bool(np.any(radius_bound_mask(poles, data)))
 
 
 def _poles_to_params(poles: np.ndarray, margin: float = _STABLE) -> tuple[np.ndarray, int]:

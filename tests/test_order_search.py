@@ -5,7 +5,8 @@ land almost on one another, and the modal form with a unit output row then holds
 response only through huge, cancelling entries of B (1e9-1e12 on random helmets), above
 the model file's limit (``sysid.model.MAX_COEFFICIENT``): identify used to raise there.
 A search stalled above the floor gets the mode it missed inserted (``_insert_modes``), and
-one near the floor gets nothing.
+one near the floor gets nothing. Starts hold no two coinciding poles and none at the block's
+radius bound (``distinct_start``).
 """
 
 import numpy as np
@@ -14,8 +15,8 @@ import scipy.signal
 
 from sysid import lti, order_search
 from sysid.model import MAX_COEFFICIENT, Model
-from sysid.order_search import OrderCandidate, _insert_modes, _pair, block_at_noise, sweep_rms
-from sysid.output_error import block_data, refine_output_error
+from sysid.order_search import OrderCandidate, _insert_modes, _pair, block_at_noise, distinct_start, sweep_rms
+from sysid.output_error import at_radius_bound, block_data, decay_bound, linear_cost, refine_output_error
 from sysid.recordings import Recording
 from sysid.validation import sweep_spectrum
 
@@ -143,3 +144,53 @@ def test_a_plateau_far_above_the_floor_gets_the_mode_inserted_before_the_scan_go
     assert min(c.rms for c in candidates[:5]) > 100 * floor
     assert candidates[-1].order == 6 and "mode at 35 Hz" in candidates[-1].start
     assert candidates[-1].rms <= 1.2 * floor
+
+
+# A plant of a 500 Hz mode (Q 20) and two real poles, 0.9 and 0.3 (roll-off corners).
+_PAIR_500 = _pair(2 * np.pi * 500.0 / FS, 20.0)
+
+
+def _real_pole_block():
+    A = lti.real_block_diagonal(np.concatenate([_PAIR_500, [0.9, 0.3]]))
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(int(FS))
+    y = lti.simulate(A, np.ones((4, 1)), lti.block_output_row(A), 0.0, u)
+    return A, block_data(Recording(u, y + 1e-3 * rng.standard_normal(u.size), FS), (20.0, 5000.0), 1.0)
+
+
+def _min_distance(poles):
+    distance = np.abs(poles[:, None] - poles[None, :])
+    return np.min(distance[~np.eye(poles.size, dtype=bool)])
+
+
+def test_coinciding_and_bound_starting_poles_are_replaced_by_distinct_real_poles():
+    _, block = _real_pole_block()
+    bound = -np.exp(-decay_bound(block))
+    # The chain's degenerate starts: the added 0.5 twice, two poles at z = 0, a spare pole run to z = -1.
+    degenerate = np.concatenate([_PAIR_500, [0.5, 0.5, 0.0, 0.0, bound]])
+    start = distinct_start(degenerate, block, feedthrough=False, added=1)
+    assert start.size == degenerate.size + 1
+    assert _min_distance(start) >= order_search._SEPARATION
+    assert not at_radius_bound(start, block)
+    # The pair and the first of each coinciding group stay; the replacements are real poles.
+    np.testing.assert_array_equal(start[:4], np.concatenate([_PAIR_500, [0.5, 0.0]]))
+    assert np.all(start[4:].imag == 0) and set(start[4:].real) <= set(order_search._REAL_POLES)
+
+
+def test_a_start_without_degenerate_poles_is_kept_and_takes_the_added_pole_at_one_half():
+    _, block = _real_pole_block()
+    poles = np.concatenate([_PAIR_500, [0.9]])
+    np.testing.assert_array_equal(distinct_start(poles, block, feedthrough=False), poles)
+    np.testing.assert_array_equal(distinct_start(poles, block, feedthrough=False, added=1), np.append(poles, 0.5))
+
+
+def test_a_model_holding_one_half_gets_another_real_pole_and_refines_to_the_truths_cost():
+    # The order search's 'order n-1 + real pole' start from a model that already holds the added
+    # pole 0.5: the new pole goes elsewhere, and the refinement reaches the true poles' cost.
+    A_true, block = _real_pole_block()
+    start = distinct_start(np.concatenate([_PAIR_500, [0.5]]), block, feedthrough=False, added=1)
+    assert start.size == 4 and _min_distance(start) >= order_search._SEPARATION
+    fit = refine_output_error(lti.real_block_diagonal(start), np.zeros((4, 1)), np.zeros((1, 4)), np.zeros((1, 1)),
+                              block, max_iterations=20, noise_tolerance=True)
+    assert fit.cost_after <= 1.001 * linear_cost(A_true, block)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(fit.A).real)[:2], [0.3, 0.9], atol=1e-3)
