@@ -106,12 +106,12 @@ _PLAUSIBLE = 0.10
 _REFIT_ITERATIONS = 10
 # walk_delay: samples it may move from refine_delay's answer (further when the band's kernel lead is longer).
 _WALK_SPAN = 12
-# walk_delay's tolerance in output-noise variances sigma^2 = V / (2 M) (M bins): the refitted costs of the delays a
-# core holds wander by up to 7 of them on a 1 s block (random helmet 30, thesis length: delays 19-28, 0.9-10 sigma^2
-# over the smallest), while past the answer a smoothly starting response (two roll-offs: the lost first samples'
-# energy grows as k^5) costs 2-4 sigma^2 a sample (random helmet 77: 1.8, 3.9, 5.9, 9.7 sigma^2 at 1-4 samples past
-# the smallest cost, the true delay one past it). refine_delay's 40 sigma^2 is for fixed poles, which wander more.
-_WALK_NOISE = 8.0
+# walk_delay's tolerance in output-noise variances sigma^2 = V / (2 M) (M bins). Past the answer a smoothly starting
+# response (two roll-offs: the lost first samples' energy grows as k^5) costs a few sigma^2 a sample (random helmet 77,
+# short: 1.8, 3.9, 5.9, 9.7 sigma^2 at 1-4 samples past the smallest cost, the true delay one past it), and one sample
+# past the true delay cost 5.1-6.6 sigma^2 on helmets 2 and 62 (short) and 13 (thesis length, whose model there
+# validated at 1.33x against 1.03x one sample shorter). refine_delay's 40 sigma^2 is for fixed poles, which wander more.
+_WALK_NOISE = 5.0
 
 
 def delay_centimetres(samples: float, fs: float) -> float:
@@ -336,7 +336,7 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     tolerance on fixed-pole costs that are flat to the last sample reads the largest of them (77: 3 samples
     long with a fixed-pole cost at 1.0038 against the tolerance 1.004; refitted, that delay costs 1.0078).
     A response that starts smoothly (roll-offs) is read long by part of their lag, fs / (2 pi f_c) samples
-    each: the tolerance is the refitted costs' wander (_WALK_NOISE), not refine_delay's.
+    each: the tolerance (_WALK_NOISE) is a sample's cost there, not refine_delay's.
     """
     cleaned = without_residual_lines(noise, band, A, seconds, feedthrough)
     tolerance = 1 + _WALK_NOISE / (2 * block_data(noise, band, seconds).z.size)
