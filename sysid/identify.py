@@ -37,7 +37,8 @@ from threadpoolctl import threadpool_limits
 from . import lti
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .latency import LatencyEstimate, compensate_delay, estimate_latency, refine_delay, walk_delay
+from .latency import (LatencyEstimate, compensate_delay, estimate_latency, refine_delay, walk_delay,
+                      without_residual_lines)
 from .lines import undriven_lines, without_lines
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
@@ -309,15 +310,17 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     if options.latency:
         # The onset errs short by the smoothing kernel's lead, or long on a slowly rising response; the
         # picked core's poles say by how much.
-        extra, _ = refine_delay(pick.A, body, options.band, options.scan_seconds, feedthrough=options.feedthrough,
-                                delay=delay)
+        # The noise recording's lines the session's search missed, taken out once for both (latency module docstring).
+        cleaned = without_residual_lines(body, options.band, pick.A, options.scan_seconds, options.feedthrough)
+        extra, _ = refine_delay(pick.A, cleaned, options.band, options.scan_seconds, feedthrough=options.feedthrough,
+                                delay=delay, lines_out=True)
         walked = None
         if extra >= 0:
             # Read short (or right), the refitted costs settle it: the largest delay within the noise, walked
             # one sample at a time from the fixed poles' answer (latency.walk_delay); read long, refine_delay's
             # refitted costs decided already.
             walked = walk_delay(pick.A, body, options.band, options.scan_seconds, extra, feedthrough=options.feedthrough,
-                                lead=lead, long_seconds=options.refine_seconds)
+                                lead=lead, long_seconds=options.refine_seconds, cleaned=cleaned)
             extra = walked.extra
         # The walk's answer first; a trial the sweeps reject (a freed pole run toward z = 1 rings in the simulated
         # sweeps: random helmet 2, short, one sample past the true delay at 84x) the next shorter delays it visited.

@@ -222,7 +222,8 @@ def without_residual_lines(noise: Recording, band: tuple[float, float], A=None, 
 
 
 def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float, max_extra: int = 4,
-                 feedthrough: bool = False, widest: int = 12, delay: int = 0) -> tuple[int, np.ndarray]:
+                 feedthrough: bool = False, widest: int = 12, delay: int = 0,
+                 lines_out: bool = False) -> tuple[int, np.ndarray]:
     """Samples j in -widest..widest to add to the delay of a core with poles eig(A) fitted on
     ``noise`` (already advanced by the current delay), and the costs V of the window that decided
     it, lowest j first (from j = 0 unless the delay was shortened); see the module docstring.
@@ -237,9 +238,10 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
     past it (a dip, within _PLAUSIBLE of the smallest: the spare poles imitate the missing samples
     only roughly), the poles are refitted at j <= 0, or at the answer and the dips
     (``output_error.refine_output_error``, _REFIT_ITERATIONS), and the refitted costs decide
-    (infinite where not refitted).
+    (infinite where not refitted). ``lines_out``: ``noise`` is already ``without_residual_lines``'s.
     """
-    noise = without_residual_lines(noise, band, A, seconds, feedthrough)
+    if not lines_out:
+        noise = without_residual_lines(noise, band, A, seconds, feedthrough)
 
     def block(j):
         return block_data(compensate_delay(noise, j), band, seconds)
@@ -309,12 +311,13 @@ class DelayWalk:
 
 
 def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, start: int, feedthrough: bool = False,
-               lead: int = 0, long_seconds: float | None = None) -> DelayWalk:
+               lead: int = 0, long_seconds: float | None = None, cleaned: Recording | None = None) -> DelayWalk:
     """The largest delay d >= 0 (samples added to the one taken out of ``noise``) whose core, refitted, costs
     within _WALK_NOISE / (2 M) of the smallest refitted cost (M bins), found by walking one sample at a time from
     ``start`` (``refine_delay``'s answer) up and down to at most max(_WALK_SPAN, ``lead``) samples either side
     (``lead``: the band-limited kernel's lead, fs / (2 f_top) samples, how far short the onset may read);
     where that lead is longer than _WALK_SPAN, the walk is done again on ``long_seconds`` from its answer.
+    ``cleaned``: ``without_residual_lines(noise, band, A, seconds, feedthrough)`` when already at hand.
 
     At each delay the poles are refitted (``output_error.refine_output_error``, _REFIT_ITERATIONS, stopped at
     the noise's tolerance) from those of the neighbouring delay: a continuation, so each refit starts one
@@ -338,7 +341,8 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     A response that starts smoothly (roll-offs) is read long by part of their lag, fs / (2 pi f_c) samples
     each: the tolerance (_WALK_NOISE) is a sample's cost there, not refine_delay's.
     """
-    cleaned = without_residual_lines(noise, band, A, seconds, feedthrough)
+    if cleaned is None:
+        cleaned = without_residual_lines(noise, band, A, seconds, feedthrough)
     tolerance = 1 + _WALK_NOISE / (2 * block_data(noise, band, seconds).z.size)
 
     def refit(A0, j, recording=None):
@@ -379,5 +383,5 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
         # refitted costs there wander by as much as a few samples of delay cost, and ``long_seconds`` decide from
         # the scan block's answer (random helmet 30, thesis length, band to 360 Hz: the 1 s block read 21 or 29
         # for 25 by the tolerance; on 10 s the costs are flat to 26 within 0.5 sigma^2 and 60 sigma^2 up at 28).
-        return walk_delay(fits[extra].A, noise, band, long_seconds, extra, feedthrough)
+        return walk_delay(fits[extra].A, noise, band, long_seconds, extra, feedthrough, cleaned=noise)
     return DelayWalk(extra, fits[extra].A, costs, fits)
