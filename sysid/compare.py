@@ -32,8 +32,8 @@ from .corrections import corrected, excluded_mask
 from .errors import IdentificationError
 from .lines import fit_sinusoids
 from .recordings import Recording, check_same_rate
-from .validation import (VALIDATION_BAND, band_energy, band_rms, check_repeats, noise_floor, repeat_lag,
-                         validation_start)
+from .validation import (SKIP_S, VALIDATION_BAND, aligned_ears, band_energy, band_rms, check_repeats, noise_floor,
+                         repeat_lag, validation_start)
 
 __all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "LAGS", "BOUND_99"]
 
@@ -163,10 +163,11 @@ def compare(model, sweeps: list[Recording], band=VALIDATION_BAND, lags: int = LA
     rms_full = float(np.sqrt(sum(np.sum(t**2) for t in tails) / total))
     centred = np.concatenate(measured)
     fit_percent = float(100.0 * (1.0 - np.linalg.norm(np.concatenate(tails)) / np.linalg.norm(centred - centred.mean())))
-    # The excluded samples hold no noise in the repeat difference: scale to the kept samples.
-    floor = noise_floor(cleaned[0], cleaned[1], band, lag=lag) / np.sqrt(max(min(kept), 1e-6))
+    noise_pair, kept_both = _equal_where_excluded(cleaned, [s["excluded"] for s in per_sweep], lag, first)
+    # The excluded samples hold no noise in the repeat difference: scale to the samples kept in both.
+    floor = noise_floor(*noise_pair, band, lag=lag) / np.sqrt(max(kept_both, 1e-6))
 
-    bands = _band_table(tails, cleaned, fs, first)
+    bands = _band_table(tails, noise_pair, fs, lag)
     lag_axis = np.arange(lags)
     cross_axis = np.arange(-lags + 1, lags)
     r_e = np.zeros(lags)
@@ -200,11 +201,34 @@ class _BandEnergy:
         return band_energy(np.sqrt(self.power[inside]), self.size)
 
 
-def _band_table(tails, cleaned, fs, first) -> list[dict]:
-    """Error and noise RMS in each third-octave band (noise from the repeat difference)."""
-    half = [c.y[first:] for c in cleaned]
-    n = min(h.size for h in half)
-    difference = _BandEnergy((half[0][:n] - half[1][:n]) / np.sqrt(2.0), fs)
+def _equal_where_excluded(cleaned: list[Recording], masks: list[np.ndarray], lag: int,
+                          first: int) -> tuple[list[Recording], float]:
+    """The two cleaned repeats with the second taking the first's value (aligned by ``lag``) wherever
+    either is excluded, and the fraction of the aligned samples after ``first`` kept in both.
+
+    An excluded stretch holds the model's prediction in place of the ear signal; where only one
+    repeat is excluded there, the repeat difference would hold the model's error against the other
+    repeat's measurement, and the floor would follow the model (a model ringing at fs / 2 raised it
+    200-fold and read 1.1x the floor at 261x). Equal values put no noise there, whatever the model.
+    """
+    second = cleaned[1]
+    j = np.arange(second.y.size)
+    i = j + lag  # the first repeat's sample aligned with the second's sample j (``repeat_lag``)
+    overlap = (i >= 0) & (i < masks[0].size) & (j < masks[1].size)
+    either = np.zeros(j.size, dtype=bool)
+    either[overlap] = masks[1][j[overlap]] | masks[0][i[overlap]]
+    y = second.y.copy()
+    y[either] = cleaned[0].y[i[either]]
+    validated = overlap & (np.minimum(i, j) >= first)
+    kept = 1.0 - float(np.mean(either[validated])) if np.any(validated) else 1.0
+    return [cleaned[0], Recording(second.u, y, second.fs, second.path)], kept
+
+
+def _band_table(tails, repeats, fs, lag) -> list[dict]:
+    """Error and noise RMS in each third-octave band (noise from the difference of the aligned repeats)."""
+    half = aligned_ears(repeats[0], repeats[1], SKIP_S, lag)
+    n = half[0].size
+    difference = _BandEnergy((half[0] - half[1]) / np.sqrt(2.0), fs)
     errors = [_BandEnergy(t, fs) for t in tails]
     total = sum(t.size for t in tails)
     rows = []

@@ -30,7 +30,7 @@ from .recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
            "noise_floor", "repeat_lines", "without_repeat_lines", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "validation_start",
-           "SKIP_S", "VALIDATION_BAND"]
+           "aligned_ears", "SKIP_S", "VALIDATION_BAND"]
 
 SKIP_S = 0.05
 # Above this largest prime factor of a length numpy's DFT is slow (long generic passes or Bluestein's
@@ -175,7 +175,7 @@ def repeat_lag(sweep1: Recording, sweep2: Recording) -> int:
     return _align(sweep1.u, sweep2.u)
 
 
-def _aligned_ears(sweep1: Recording, sweep2: Recording, skip_s: float, lag: int | None) -> tuple[np.ndarray, np.ndarray]:
+def aligned_ears(sweep1: Recording, sweep2: Recording, skip_s: float, lag: int | None) -> tuple[np.ndarray, np.ndarray]:
     """The two ear signals over their overlap after alignment (``repeat_lag``, or the ``lag`` given),
     without the first ``skip_s`` seconds; empty when they do not overlap past it."""
     lag = repeat_lag(sweep1, sweep2) if lag is None else lag
@@ -186,9 +186,9 @@ def _aligned_ears(sweep1: Recording, sweep2: Recording, skip_s: float, lag: int 
 
 
 def _difference(sweep1: Recording, sweep2: Recording, skip_s: float, lag: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """y1 - y2 of ``_aligned_ears`` and the first sweep's input over the same samples."""
+    """y1 - y2 of ``aligned_ears`` and the first sweep's input over the same samples."""
     lag = repeat_lag(sweep1, sweep2) if lag is None else lag
-    y1, y2 = _aligned_ears(sweep1, sweep2, skip_s, lag)
+    y1, y2 = aligned_ears(sweep1, sweep2, skip_s, lag)
     start = max(lag, 0) + int(round(skip_s * sweep1.fs))
     return y1 - y2, sweep1.u[start:start + y1.size]
 
@@ -260,7 +260,7 @@ def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, 
     infinite and every band "above the noise floor". No other estimate of the output
     noise exists in the sweeps, so this is an error rather than a warning.
     """
-    y1, y2 = _aligned_ears(sweep1, sweep2, skip_s, lag)
+    y1, y2 = aligned_ears(sweep1, sweep2, skip_s, lag)
     if y1.size >= 2 and np.array_equal(y1, y2):
         raise IdentificationError(f"{sweep1.path}, {sweep2.path}: the two sweeps are sample-identical (the same "
                                   "recording twice?), so the noise floor is unknown; give two separate recordings")

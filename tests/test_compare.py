@@ -1,6 +1,8 @@
 """compare: the true plant sits at the noise floor; a wrong model shows where it fails."""
 
+import copy
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -57,6 +59,21 @@ class TestCompare:
         # The floor leaves the lines out either way (validation.noise_floor): the hum is error, not noise.
         assert raw.noise_floor == pytest.approx(modelled.noise_floor, rel=0.01)
         assert raw.ratio > 5 and 0.9 < modelled.ratio < 1.2
+
+    def test_floor_does_not_follow_the_model_inside_a_stretch_excluded_in_one_repeat(self, clean):
+        # An excluded stretch holds the model's prediction; excluded in the first repeat only, the
+        # repeats' difference there would hold the model's error against the second's measurement.
+        first = Path(str(clean.sweeps[0].path)).name
+        floors = []
+        for gain in (1.0, 30.0):
+            model = copy.deepcopy(clean.plant)
+            model.C = model.C * gain
+            model.D = model.D * gain
+            model.excluded = {first: [[0.2, 0.5]]}
+            floors.append(compare(model, clean.sweeps).noise_floor)
+        unexcluded = compare(clean.plant, clean.sweeps).noise_floor
+        assert floors[1] == pytest.approx(floors[0], rel=1e-9)
+        assert floors[0] == pytest.approx(unexcluded, rel=0.1)
 
     def test_to_dict_is_json_without_signals(self, clean):
         data = compare(clean.plant, clean.sweeps).to_dict()
