@@ -20,33 +20,21 @@ missing information, slowly when the gaps hold most of the recording's loud samp
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
 from threadpoolctl import threadpool_limits
 
-__all__ = ["refine_masked", "MaskedFit"]
+from .output_error import OutputErrorFit
+
+__all__ = ["refine_masked"]
 
 # Largest pole radius a step may reach: a pole on the unit circle is no stable core.
 _RADIUS_BOUND = 1.0 - 1e-9
 # Finite-difference step of a pole parameter, relative to its distance 1 - |p| from the unit circle
 # (a pole at 0.9997 moves its state's gain 1 / (1 - p) by 1e-4 of itself).
 _STEP = 1e-4
-
-
-@dataclass(frozen=True)
-class MaskedFit:
-    """The refined core (A real block diagonal, B, C, D) and the cost V over the kept samples before and after."""
-
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    cost_before: float
-    cost_after: float
-    iterations: int
 
 
 def _blocks(poles: np.ndarray) -> tuple[list[int], np.ndarray]:
@@ -83,7 +71,7 @@ def _split(sizes: list[int], theta: np.ndarray) -> list[np.ndarray]:
 
 
 def refine_masked(A, v: np.ndarray, y: np.ndarray, keep: np.ndarray, feedthrough: bool = False,
-                  max_iterations: int = 20) -> MaskedFit:
+                  max_iterations: int = 20) -> OutputErrorFit:
     """The core with the poles of A refined by output error over the ``keep`` samples of (v, y); see the
     module docstring. v: the core's input (FS) from the recording's first sample (the states start at
     rest there), y: the ear signal the core should predict (FS), keep: True where y counts. Stops when
@@ -94,7 +82,7 @@ def refine_masked(A, v: np.ndarray, y: np.ndarray, keep: np.ndarray, feedthrough
         return _refine_masked(A, v, y, keep, feedthrough, max_iterations)
 
 
-def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> MaskedFit:
+def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> OutputErrorFit:
     v, y, keep = np.asarray(v, float), np.asarray(y, float), np.asarray(keep, bool)
     sizes, theta = _blocks(np.linalg.eigvals(np.asarray(A, float)))
     y_kept = y[keep]
@@ -155,4 +143,4 @@ def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> MaskedFit:
         k += size
     C_out = c[:n][None, :]
     D_out = np.array([[c[n] if feedthrough else 0.0]])
-    return MaskedFit(A_out, B_out, C_out, D_out, cost_before, cost, iterations)
+    return OutputErrorFit(A_out, B_out, C_out, D_out, cost_before, cost, iterations)
