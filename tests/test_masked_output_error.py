@@ -23,15 +23,21 @@ def pair(radius, f_hz):
 POLES = pair(0.9995, 68.0) + [0.6] + pair(0.99, 1000.0)
 
 
-def test_poles_and_prediction_from_the_kept_samples_where_the_gaps_hold_the_loud_ones():
-    rng = np.random.default_rng(0)
+def gapped(seed: int = 0):
+    """(input, clean ear signal, noise std, kept samples, recorded ear) of the plant POLES: the loudest
+    30 % of the samples are missing (as where a channel clips) and stand at zero."""
+    rng = np.random.default_rng(seed)
     A, B, C, D = plant(POLES)
     v = 0.1 * rng.standard_normal(60000)
     clean = lti.simulate(A, B, C, D, v)
     noise = 1e-3 * np.std(clean)
-    # The loudest 30 % of the samples are missing (as where a channel clips) and stand at zero.
     keep = np.abs(clean) < np.quantile(np.abs(clean), 0.7)
     y = np.where(keep, clean + noise * rng.standard_normal(v.size), 0.0)
+    return v, clean, noise, keep, y
+
+
+def test_poles_and_prediction_from_the_kept_samples_where_the_gaps_hold_the_loud_ones():
+    v, clean, noise, keep, y = gapped()
     start = lti.real_block_diagonal(np.array(POLES) * np.array([0.9999, 0.9999, 0.9, 1.002, 1.002]))
     fit = refine_masked(start, v, y, keep)
     assert fit.cost_after < fit.cost_before
@@ -47,13 +53,8 @@ def test_poles_and_prediction_from_the_kept_samples_where_the_gaps_hold_the_loud
 def test_a_fit_that_counts_the_gaps_is_pulled_off_the_plant():
     # The same data with every sample counted (the gaps as recorded, at zero): the cost cannot reach the
     # noise and the poles move; so the mask is what makes the first test pass.
-    rng = np.random.default_rng(0)
-    A, B, C, D = plant(POLES)
-    v = 0.1 * rng.standard_normal(60000)
-    clean = lti.simulate(A, B, C, D, v)
-    noise = 1e-3 * np.std(clean)
-    keep = np.abs(clean) < np.quantile(np.abs(clean), 0.7)
-    y = np.where(keep, clean + noise * rng.standard_normal(v.size), 0.0)
+    v, clean, noise, keep, y = gapped()
+    A = lti.real_block_diagonal(np.array(POLES))
     fit = refine_masked(A, v, y, np.ones(v.size, bool))
     assert fit.cost_after > 100 * noise**2 * v.size
 
