@@ -32,6 +32,8 @@ __all__ = [
     "gramians",
     "hankel_singular_values",
     "balanced_realisation",
+    "balanced_truncation",
+    "chained_realisation",
     "equalise_states",
 ]
 
@@ -40,6 +42,9 @@ __all__ = [
 MAX_MODAL_CONDITION = 1e8
 # Points per block of ``pole_residue_response`` (its reciprocals, up to 30 poles, within 1 MB).
 _RESPONSE_CHUNK = 2048
+# Real poles closer than this fraction of their distance 1 - |p| from the unit circle are chained
+# (``chained_realisation``).
+_CLUSTER_GAP = 0.1
 
 
 @dataclass(frozen=True)
@@ -302,7 +307,7 @@ def hankel_singular_values(A, B, C) -> np.ndarray:
 
 
 def _gramian_factor(W: np.ndarray) -> np.ndarray:
-    """L with L L^T = W for a symmetric positive semi-definite W (eigenvalues below zero by round-off clipped)."""
+    """L with L L^H = W for a Hermitian positive semi-definite W (eigenvalues below zero by round-off clipped)."""
     values, vectors = np.linalg.eigh(W)
     return vectors * np.sqrt(np.clip(values, 0.0, None))[None, :]
 
@@ -329,6 +334,140 @@ def equalise_states(A, B, C, D):
     return A / t[:, None] * t[None, :], B / t[:, None], C * t[None, :], np.array([[D]])
 
 
+def _pole_clusters(poles: np.ndarray) -> list[np.ndarray]:
+    """Indices of ``poles`` in clusters (single linkage: poles closer than _CLUSTER_GAP times their
+    distance 1 - |p| from the unit circle belong to one), each sorted by real, then imaginary part."""
+    n = poles.size
+    near = np.abs(poles[:, None] - poles[None, :]) < _CLUSTER_GAP * (1.0 - np.abs(poles))[:, None]
+    label = -np.ones(n, dtype=int)
+    for i in range(n):
+        if label[i] >= 0:
+            continue
+        label[i], stack = i, [i]
+        while stack:
+            j = stack.pop()
+            for k in np.flatnonzero((near[j] | near[:, j]) & (label < 0)):
+                label[k] = i
+                stack.append(k)
+    clusters = [np.flatnonzero(label == i) for i in np.unique(label)]
+    return [c[np.lexsort((poles[c].imag, poles[c].real))] for c in clusters]
+
+
+def chained_realisation(A, B, C, D):
+    """A realisation of a stable SISO system in which nearly coincident poles form chains, or None
+    when its modal form is unreliable (``ModalForm.reliable``); complex where a cluster holds
+    complex poles (``_square_root_balance`` makes the balanced result real).
+
+    A modal (diagonal) realisation of a cluster of close poles p_1 .. p_m needs residues r_i
+    that grow like 1 / prod |p_i - p_j| and cancel (random helmet 79, short session: seven real
+    poles within 6e-4 of 0.9887, residues of 2e4; 17: a pair 0.51155 +- 3.7e-5j beside real
+    poles at 0.5117 and 0.5134, residues of 3e7); its Gramians lose their small eigenvalues to
+    round-off, so it cannot be balanced. The Newton basis phi_k = alpha^(k-1) / prod_{j<=k}
+    (z - p_j) holds the same cluster with coefficients of the size of the response: it is the
+    chain x_1(t+1) = p_1 x_1 + u, x_k(t+1) = p_k x_k + alpha x_(k-1), with
+    sum_i r_i / (z - p_i) = sum_k d_k / prod_{j<=k} (z - p_j), d_k = sum_{i>=k} r_i
+    prod_{j<k} (p_i - p_j) (from 1/(z - a) = sum_k prod_{j<k} (a - p_j) / prod_{j<=k} (z - p_j),
+    which ends at p_k = a): products of the poles' small differences, no division by them.
+    alpha = 1 - |p| at the cluster's mean gives every link a gain of order one at the
+    cluster's frequency. A complex pair alone stays a real 2 x 2 rotation block (C = [1, 0],
+    B = [2 Re r, -2 Im r] for the residue r of p = a + jb, the block [[a, b], [-b, a]]), a real
+    pole alone a 1 x 1 block.
+    """
+    A, B, C, D = _as_siso(A, B, C, D)
+    modal = modal_form(A, B, C, D)
+    if not modal.reliable or modal.poles.size == 0:
+        return None
+    poles, residues = modal.poles, modal.residues
+    n = poles.size
+    real = np.abs(poles.imag) < 1e-12 * np.maximum(1.0, np.abs(poles))
+    clusters = _pole_clusters(poles)
+    dtype = complex if any(c.size > 1 and not np.all(real[c]) for c in clusters) else float
+    Ac, Bc, Cc = np.zeros((n, n), dtype), np.zeros((n, 1), dtype), np.zeros((1, n), dtype)
+    k = 0
+    for indices in clusters:
+        if indices.size == 1 and not real[indices[0]]:
+            p, r = poles[indices[0]], residues[indices[0]]
+            if p.imag < 0:
+                continue  # the pair's block comes with its upper pole
+            Ac[k:k + 2, k:k + 2] = [[p.real, p.imag], [-p.imag, p.real]]
+            Bc[k:k + 2, 0] = [2 * r.real, -2 * r.imag]
+            Cc[0, k] = 1.0
+            k += 2
+            continue
+        cluster, r = poles[indices], residues[indices]
+        if dtype is float:
+            cluster, r = cluster.real, r.real
+        m = cluster.size
+        alpha = max(1.0 - abs(cluster.mean()), 1e-12)
+        d = np.array([np.sum(r[j:] * np.prod(cluster[j:, None] - cluster[None, :j], axis=1)) for j in range(m)])
+        Ac[k:k + m, k:k + m] = np.diag(cluster) + np.diag(np.full(m - 1, alpha), -1)
+        Bc[k, 0] = 1.0
+        Cc[0, k:k + m] = d / alpha ** np.arange(m)
+        k += m
+    if k != n:
+        return None
+    return Ac, Bc, Cc, np.array([[D]])
+
+
+def _square_root_balance(A, B, C, D, reference: np.ndarray, z: np.ndarray, rtol: float, truncate: float = 0.0):
+    """Tombs & Postlethwaite's square-root balancing of (A, B, C, D), or None when the result's response
+    at z differs from ``reference`` by more than rtol of its peak. With ``truncate`` > 0 the states whose
+    Hankel singular values lie below ``truncate`` times the largest are left out (balanced truncation);
+    without, such a state below 1e-13 of the largest gives None (it cannot be balanced).
+
+    A complex realisation (``chained_realisation``) balances to a real system's balanced realisation
+    times a diagonal of unit phases (for distinct Hankel singular values): the phases that make B real
+    and positive leave it real, and its imaginary round-off is dropped (the response check decides)."""
+    try:
+        wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.conj().T)
+        wo = scipy.linalg.solve_discrete_lyapunov(A.conj().T, C.conj().T @ C)
+        lc, lo = _gramian_factor((wc + wc.conj().T) / 2), _gramian_factor((wo + wo.conj().T) / 2)
+        u, s, vt = np.linalg.svd(lo.conj().T @ lc)
+    except (np.linalg.LinAlgError, ValueError, scipy.linalg.LinAlgError):
+        return None
+    if not np.all(np.isfinite(s)) or s[0] <= 0:
+        return None
+    keep = s.size if truncate <= 0 else int(np.count_nonzero(s >= truncate * s[0]))
+    if s[keep - 1] < 1e-13 * s[0]:
+        return None
+    root = 1.0 / np.sqrt(s[:keep])
+    T = lc @ vt[:keep].conj().T * root[None, :]
+    T_inv = root[:, None] * (u[:, :keep].conj().T @ lo.conj().T)
+    Ab, Bb, Cb = T_inv @ A @ T, T_inv @ B, C @ T
+    if np.iscomplexobj(Ab):
+        phase = np.exp(-1j * np.angle(Bb[:, 0]))
+        Ab, Bb, Cb = (phase[:, None] * Ab * np.conj(phase)[None, :]).real, (phase[:, None] * Bb).real, \
+            (Cb * np.conj(phase)[None, :]).real
+    after = frequency_response(Ab, Bb, Cb, D[0, 0].real, z)
+    if not np.all(np.isfinite(after)) or np.max(np.abs(after - reference)) > rtol * max(np.max(np.abs(reference)), 1e-300):
+        return None
+    return Ab, Bb, Cb, D.real
+
+
+def balanced_truncation(A, B, C, D, tol: float = 1e-10, rtol: float = 1e-5):
+    """The balanced realisation of a stable SISO system without its states whose Hankel singular
+    values lie below ``tol`` times the largest (Moore 1981; the H-infinity error is at most twice
+    the sum of the removed values), or None when no such realisation reproduces the frequency
+    response on 512 points of the unit circle within ``rtol`` of the peak gain.
+
+    The states left out carry nothing of the input-output behaviour: a cluster of close real
+    poles that an output-error fit placed where fewer poles would do (random helmet 79, short
+    session: seven poles within 6e-4 of 0.9887, Hankel singular values down to 1e-17 of the
+    largest in their ``chained_realisation``) has no balanced realisation of its full order.
+    """
+    A, B, C, D = equalise_states(A, B, C, D)
+    if A.shape[0] == 0 or spectral_radius(A) >= 1.0:
+        return None
+    z = np.exp(1j * np.pi * (np.arange(512) + 0.5) / 512)
+    reference = frequency_response(A, B, C, D[0, 0], z)
+    truncated = _square_root_balance(A, B, C, D, reference, z, rtol, truncate=tol)
+    if truncated is None:
+        chained = chained_realisation(A, B, C, D)
+        if chained is not None:
+            truncated = _square_root_balance(*chained, reference, z, rtol, truncate=tol)
+    return truncated
+
+
 def balanced_realisation(A, B, C, D, rtol: float = 1e-5):
     """The balanced realisation of a stable SISO system (Moore 1981; square-root method of
     Tombs & Postlethwaite, Int. J. Control 46(4), 1987).
@@ -344,27 +483,21 @@ def balanced_realisation(A, B, C, D, rtol: float = 1e-5):
     carries nothing of the input-output behaviour) cannot be balanced, and an unstable
     one has no Gramians: both are returned in the ``equalise_states`` form. So is a
     result whose frequency response on 512 points of the unit circle differs from the
-    input's by more than ``rtol`` of the peak gain (Gramians lost to round-off).
+    input's by more than ``rtol`` of the peak gain (Gramians lost to round-off), after a
+    second try from the ``chained_realisation`` (close real poles as chains: random
+    helmets 17 and 79, short sessions, balanced entries 1.06e4 and 2.16e4 before).
     """
     A, B, C, D = equalise_states(A, B, C, D)
     n = A.shape[0]
     if n == 0 or spectral_radius(A) >= 1.0:
         return A, B, C, D
-    try:
-        wc, wo = gramians(A, B, C)
-        lc, lo = _gramian_factor(wc), _gramian_factor(wo)
-        u, s, vt = np.linalg.svd(lo.T @ lc)
-    except (np.linalg.LinAlgError, ValueError, scipy.linalg.LinAlgError):
-        return A, B, C, D
-    if not np.all(np.isfinite(s)) or s[0] <= 0 or s[-1] < 1e-13 * s[0]:
-        return A, B, C, D
-    root = 1.0 / np.sqrt(s)
-    T = lc @ vt.T * root[None, :]
-    T_inv = root[:, None] * (u.T @ lo.T)
-    Ab, Bb, Cb = T_inv @ A @ T, T_inv @ B, C @ T
     z = np.exp(1j * np.pi * (np.arange(512) + 0.5) / 512)
-    before = frequency_response(A, B, C, D[0, 0], z)
-    after = frequency_response(Ab, Bb, Cb, D[0, 0], z)
-    if not np.all(np.isfinite(after)) or np.max(np.abs(after - before)) > rtol * max(np.max(np.abs(before)), 1e-300):
-        return A, B, C, D
-    return Ab, Bb, Cb, D
+    reference = frequency_response(A, B, C, D[0, 0], z)
+    balanced = _square_root_balance(A, B, C, D, reference, z, rtol)
+    if balanced is None:
+        # Gramians lost to round-off, mostly a cluster of close real poles with large cancelling
+        # residues: balanced again from its chain realisation (``chained_realisation``).
+        chained = chained_realisation(A, B, C, D)
+        if chained is not None:
+            balanced = _square_root_balance(*chained, reference, z, rtol)
+    return (A, B, C, D) if balanced is None else balanced

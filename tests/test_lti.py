@@ -103,3 +103,51 @@ def test_simulate_with_coinciding_poles_equals_the_state_recursion():
     u = rng.standard_normal(2000)
     _, expected, _ = scipy.signal.dlsim((A, B, C, D, 1.0), u)
     np.testing.assert_allclose(lti.simulate(A, B, C, D, u), expected[:, 0], atol=1e-9 * np.max(np.abs(expected)))
+
+
+def _cluster(newton: np.ndarray):
+    """Four real poles within 1e-3 of 0.9 in modal form (A = diag(p), C = [1 1 1 1]) for the Newton-form
+    response sum_k newton[k] / prod_{j<=k} (z - p_j), and that response at Z: residues of 1e4 to 1e6
+    that cancel."""
+    p = 0.9 + np.array([0.0, 2e-4, 5e-4, 9e-4])
+    r = [sum(newton[k] / np.prod([p[i] - p[j] for j in range(k + 1) if j != i]) for k in range(i, 4)) for i in range(4)]
+    exact = sum(newton[k] / np.prod([Z - p[j] for j in range(k + 1)], axis=0) for k in range(4))
+    return np.diag(p), np.array(r)[:, None], np.ones((1, 4)), exact
+
+
+def test_clustered_real_poles_with_cancelling_residues_balance_to_entries_of_order_one():
+    # The Gramians of the modal form lose their small eigenvalues (the square-root method's result
+    # misses the response); its chain realisation balances.
+    A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 1e-4]))
+    assert np.abs(B).max() > 1e6
+    Ab, Bb, Cb, Db = lti.balanced_realisation(A, B, C, 0.0)
+    assert Ab.shape == (4, 4)
+    assert max(np.abs(Ab).max(), np.abs(Bb).max(), np.abs(Cb).max()) < 1.0 + 1e-9
+    assert np.max(np.abs(lti.frequency_response(Ab, Bb, Cb, Db, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
+    wc, wo = lti.gramians(Ab, Bb, Cb)
+    np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
+    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
+
+
+def test_chained_realisation_holds_the_cluster_with_coefficients_of_the_response_size():
+    A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 1e-4]))
+    Ac, Bc, Cc, Dc = lti.chained_realisation(A, B, C, 0.0)
+    assert np.count_nonzero(np.diag(Ac, -1)) == 3 and max(np.abs(Bc).max(), np.abs(Cc).max()) < 10.0
+    assert np.max(np.abs(lti.frequency_response(Ac, Bc, Cc, Dc, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
+
+
+def test_a_state_that_carries_nothing_is_left_out_by_balanced_truncation():
+    # The cluster's fourth Newton coefficient zero: the order-4 modal form is an order-3 system,
+    # which balanced_realisation cannot balance at order 4 (entries stay > 10) and
+    # balanced_truncation holds at order 3 with entries of order one and the same response.
+    A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 0.0]))
+    Ab, Bb, Cb, _ = lti.balanced_realisation(A, B, C, 0.0)
+    assert max(np.abs(Bb).max(), np.abs(Cb).max()) > 10.0
+    At, Bt, Ct, Dt = lti.balanced_truncation(A, B, C, 0.0)
+    assert At.shape == (3, 3)
+    assert max(np.abs(At).max(), np.abs(Bt).max(), np.abs(Ct).max()) < 1.0 + 1e-9
+    assert np.max(np.abs(lti.frequency_response(At, Bt, Ct, Dt, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
+    # Nothing negligible: the full order, as balanced_realisation gives it.
+    plant = random_plant(0).model
+    full = lti.balanced_truncation(plant.A, plant.B, plant.C, plant.D)
+    np.testing.assert_allclose(full[0], lti.balanced_realisation(plant.A, plant.B, plant.C, plant.D)[0], atol=1e-9)
