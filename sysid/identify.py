@@ -44,6 +44,7 @@ from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
 from .output_error import at_radius_bound, block_data, refine_output_error
 from .recordings import Recording, RecordingFile, check_same_rate
+from .reduction import without_degenerate_states
 from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .subspace import SubspaceDecomposition
 from .thresholds import IDENTIFICATION_BAND, TRANSIENT_S
@@ -381,6 +382,11 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     if rms > pick_rms:
         # The longer block did not help on the sweeps: keep the scan's model of that order.
         A, B, C, D, rms = pick.A, pick.B, pick.C, pick.D, pick_rms
+    # States the data did not ask for out: poles parked at the block's radius bound, states no balanced
+    # realisation of the full order holds (sysid.reduction).
+    reduced = without_degenerate_states(A, B, C, D, rms, block, lambda c: time_rms(c, delay), options.min_gain,
+                                        options.feedthrough)
+    A, B, C, D, rms = reduced.A, reduced.B, reduced.C, reduced.D, reduced.rms
     gamma = int(pick.start.split("=")[1]) if pick.start.startswith("grid gamma=") else grid_gammas.get(pick.order, grid.chosen.gamma)
     model = Model(path=path, fs=body.fs, A=A, B=B, C=C, D=D, delay=delay,
                   identification=dict(provenance, method="latency, seed grid, then order search with output-error "
