@@ -465,6 +465,10 @@ def balanced_truncation(A, B, C, D, tol: float = 1e-10, rtol: float = 1e-5):
         chained = chained_realisation(A, B, C, D)
         if chained is not None:
             truncated = _square_root_balance(*chained, reference, z, rtol, truncate=tol)
+    if truncated is not None and truncated[0].shape[0] < A.shape[0]:
+        # A discrete-time balanced truncation is stable but not balanced itself (its Gramians differ from
+        # the kept block of the full ones): balanced once more at its own order.
+        truncated = _square_root_balance(*truncated, reference, z, rtol) or truncated
     return truncated
 
 

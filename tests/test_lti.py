@@ -147,6 +147,10 @@ def test_a_state_that_carries_nothing_is_left_out_by_balanced_truncation():
     assert At.shape == (3, 3)
     assert max(np.abs(At).max(), np.abs(Bt).max(), np.abs(Ct).max()) < 1.0 + 1e-9
     assert np.max(np.abs(lti.frequency_response(At, Bt, Ct, Dt, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
+    # Balanced at its own order (a discrete-time truncation alone is not).
+    wc, wo = lti.gramians(At, Bt, Ct)
+    np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
+    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
     # Nothing negligible: the full order, as balanced_realisation gives it.
     plant = random_plant(0).model
     full = lti.balanced_truncation(plant.A, plant.B, plant.C, plant.D)
