@@ -171,3 +171,50 @@ def test_coinciding_columns_are_dropped_with_the_minimum_norm_solution_of_lstsq(
     pinv = np.linalg.pinv(matrix, rcond=cutoff)
     np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ pinv @ rhs, atol=1e-9)
     np.testing.assert_allclose(factor.q_times(factor.pinv_t(g)), pinv.T @ g, atol=1e-7)
+
+
+def test_a_moderately_ill_conditioned_regressor_takes_cholesky_qr2_with_lstsq_solution(rng):
+    # Condition between the Gram route's limit and CholeskyQR2's: Q explicit and orthonormal,
+    # no column dropped, lstsq's solution and projector.
+    base = rng.standard_normal((500, 6))
+    base[:, 5] = base[:, 4] + 1e-5 * rng.standard_normal(500)
+    matrix = np.asfortranarray(base / np.linalg.norm(base, axis=0))
+    assert output_error._GRAM_CONDITION <= np.linalg.cond(matrix) < output_error._CHOLESKY_QR2_CONDITION
+    rhs = rng.standard_normal(500)
+    factor, x = output_error._qr_solve(matrix, rhs)
+    assert factor.q is not None and factor.keep is None
+    np.testing.assert_allclose(factor.q.T @ factor.q, np.eye(6), atol=1e-12)
+    np.testing.assert_allclose(factor.q @ factor.r, matrix, atol=1e-13)
+    expected = np.linalg.lstsq(matrix, rhs, rcond=None)[0]
+    np.testing.assert_allclose(x, expected, rtol=1e-8)
+
+
+def test_a_nearly_real_pair_is_split_into_two_real_poles():
+    d = 0.015
+    near = np.exp(-d) * np.exp(1e-7j)
+    pair = 0.9 * np.exp(0.2j)
+    poles = np.array([near, np.conj(near), pair, np.conj(pair), 0.5])
+    split = output_error.split_near_real_pairs(poles)
+    assert split.size == poles.size
+    np.testing.assert_allclose(np.sort(split[np.abs(split.imag) == 0].real),
+                               np.sort([0.5, np.exp(-1.1 * d), np.exp(-0.9 * d)]))
+    assert np.count_nonzero(np.isin(split, [pair, np.conj(pair)])) == 2
+    # Nothing nearly real: returned as given.
+    np.testing.assert_array_equal(output_error.split_near_real_pairs(poles[2:]), poles[2:])
+
+
+def test_a_pair_run_to_the_real_axis_refines_to_the_two_real_poles_it_imitated(rng):
+    # Two real poles (roll-off corners) and a mode; the start holds the real poles as a pair at
+    # angle 1e-9: the pair parametrisation cannot leave the upper half plane, split it can.
+    poles = np.array([0.6, 0.7, 0.98 * np.exp(0.1j), 0.98 * np.exp(-0.1j)])
+    A = lti.real_block_diagonal(poles)
+    B, C, D = np.array([[0.3], [-0.2], [0.01], [0.02]]), lti.block_output_row(A), np.zeros((1, 1))
+    fs = 48000.0
+    u = rng.standard_normal(int(0.6 * fs)) * 0.1
+    y = lti.simulate(A, B, C, D, u)
+    data = block_data(Recording(u[int(0.1 * fs):], y[int(0.1 * fs):], fs, "noise"), max_seconds=None)
+    near = 0.65 * np.exp(1e-9j)
+    start = lti.real_block_diagonal(np.array([near, np.conj(near), poles[2] * 0.999, poles[3] * 0.999]))
+    fit = refine_output_error(start, np.zeros((4, 1)), np.zeros((1, 4)), np.zeros((1, 1)), data)
+    assert fit.cost_after < 1e-12 * fit.cost_before
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(fit.A)), np.sort_complex(poles), atol=1e-6)
