@@ -117,16 +117,35 @@ def _cluster(newton: np.ndarray):
 
 def test_clustered_real_poles_with_cancelling_residues_balance_to_entries_of_order_one():
     # The Gramians of the modal form lose their small eigenvalues (the square-root method's result
-    # misses the response); its chain realisation balances.
+    # misses the response: balanced_realisation only equalises); its chain realisation balances.
     A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 1e-4]))
     assert np.abs(B).max() > 1e6
-    Ab, Bb, Cb, Db = lti.balanced_realisation(A, B, C, 0.0)
+    assert np.abs(lti.balanced_realisation(A, B, C, 0.0)[1]).max() > 10.0
+    Ab, Bb, Cb, Db = lti.balanced_truncation(A, B, C, 0.0)
     assert Ab.shape == (4, 4)
     assert max(np.abs(Ab).max(), np.abs(Bb).max(), np.abs(Cb).max()) < 1.0 + 1e-9
     assert np.max(np.abs(lti.frequency_response(Ab, Bb, Cb, Db, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
     wc, wo = lti.gramians(Ab, Bb, Cb)
     np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
     assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
+
+
+def test_a_nearly_real_pair_among_close_real_poles_balances_to_a_real_system():
+    # Random helmet 17's kind: a pair 0.9 +- 3e-5j beside real poles 2e-4 and 5e-4 away, residues of
+    # 1e4-1e6 that cancel; the chain realisation is complex, its balanced form real.
+    poles = np.array([0.9 + 3e-5j, 0.9 - 3e-5j, 0.9002, 0.9005])
+    numerator = 1e-4 * np.poly([0.5, 0.3 + 0.2j, 0.3 - 0.2j])
+    r = np.array([np.polyval(numerator, p) / np.prod(p - np.delete(poles, i)) for i, p in enumerate(poles)])
+    A = lti.real_block_diagonal(poles)
+    B = np.array([[2 * r[0].real], [-2 * r[0].imag], [r[2].real], [r[3].real]])
+    C = lti.block_output_row(A)
+    exact = np.polyval(numerator, Z) / np.prod(Z[:, None] - poles[None, :], axis=1)
+    assert np.max(np.abs(lti.frequency_response(A, B, C, 0.0, Z) - exact)) < 1e-6 * np.max(np.abs(exact))
+    assert np.abs(B).max() > 1e4
+    Ab, Bb, Cb, Db = lti.balanced_truncation(A, B, C, 0.0)
+    assert Ab.dtype == float and Ab.shape == (4, 4)
+    assert max(np.abs(Ab).max(), np.abs(Bb).max(), np.abs(Cb).max()) < 1.0 + 1e-9
+    assert np.max(np.abs(lti.frequency_response(Ab, Bb, Cb, Db, Z) - exact)) < 1e-6 * np.max(np.abs(exact))
 
 
 def test_chained_realisation_holds_the_cluster_with_coefficients_of_the_response_size():
