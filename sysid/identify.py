@@ -37,8 +37,7 @@ from threadpoolctl import threadpool_limits
 from . import lti
 from .errors import IdentificationError
 from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .latency import (LatencyEstimate, compensate_delay, estimate_latency, refine_delay, walk_delay,
-                      without_residual_lines)
+from .latency import LatencyEstimate, compensate_delay, decide_delay, estimate_latency
 from .lines import undriven_lines, without_lines
 from .model import PATHS, Model
 from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
@@ -311,21 +310,14 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     if options.latency:
         # The onset errs short by the smoothing kernel's lead, or long on a slowly rising response; the
         # picked core's poles say by how much.
-        # The noise recording's lines the session's search missed, taken out once for both (latency module docstring).
-        cleaned = without_residual_lines(body, options.band, pick.A, options.scan_seconds, options.feedthrough)
-        extra, _ = refine_delay(pick.A, cleaned, options.band, options.scan_seconds, feedthrough=options.feedthrough,
-                                delay=delay, lines_out=True)
-        walked = None
-        if extra >= 0:
-            # Read short (or right), the refitted costs settle it: the largest delay within the noise, walked
-            # one sample at a time from the fixed poles' answer (latency.walk_delay); read long, refine_delay's
-            # refitted costs decided already.
-            walked = walk_delay(pick.A, body, options.band, options.scan_seconds, extra, feedthrough=options.feedthrough,
-                                lead=lead, long_seconds=options.refine_seconds, cleaned=cleaned)
-            extra = walked.extra
+        # Read short (or right), the refitted costs settle it, walked one sample at a time from the fixed poles'
+        # answer; read long, the refitted costs below the onset's delay (latency.decide_delay, shared with refits).
+        walked = decide_delay(pick.A, body, options.band, options.scan_seconds, delay, feedthrough=options.feedthrough,
+                              lead=lead, long_seconds=options.refine_seconds)
+        extra = walked.extra
         # The walk's answer first; a trial the sweeps reject (a freed pole run toward z = 1 rings in the simulated
         # sweeps: random helmet 2, short, one sample past the true delay at 84x) the next shorter delays it visited.
-        tries = [extra] if walked is None else [j for j in sorted(walked.fits, reverse=True) if 0 < j <= extra]
+        tries = [extra] if extra < 0 else [j for j in sorted(walked.fits, reverse=True) if 0 < j <= extra]
         moved_by = 0
         for extra in tries[:_DELAY_TRIES] if extra else []:
             longer = compensate_delay(body, extra)
@@ -337,9 +329,14 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             moved, moved_rms = None, np.inf
             # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
             # _FREED_ORDERS poles, one at a time, below.
+            # Read long, no pole was spent on delay, but the pick's were spent on imitating a lead (poles run to
+            # z = -1): the next higher orders of the scan, fitted on the same long delay, may hold the structure the
+            # lead displaced (random helmet 41, short: the high-pass pole missing from the pick at n 17, delay 12).
+            near = (range(pick.order - _FREED_ORDERS, pick.order) if extra > 0 else
+                    range(pick.order + 1, pick.order + _FREED_ORDERS + 1))
             starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
-                      for c in [pick, *[c for c in candidates if pick.order - _FREED_ORDERS <= c.order < pick.order]]]
-            if walked is not None:
+                      for c in [pick, *[c for c in candidates if c.order in near]]]
+            if extra in walked.fits:
                 # And from the walk's poles at that delay (refine_output_error uses only the poles): refitted there
                 # from the neighbouring delay's, they may sit in another minimum than the pick's own refit reaches.
                 starts.insert(1, (0, pick.start + ", walked", walked.fits[extra].A, pick.B, pick.C, pick.D,
@@ -374,9 +371,11 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     block = block_data(body, options.band, options.refine_seconds)
     # Stopped once an iteration gains less than the noise can tell (output_error's noise_tolerance, as every
     # refinement here): the pick sits near the long block's minimum, and MINPACK's default tolerance crawled
-    # on for 50 iterations (random helmet 5, thesis length: 18 s of CPU for 4e-6 of the cost).
+    # on for 50 iterations (random helmet 5, thesis length: 18 s of CPU for 4e-6 of the cost). A pair the scan ran to
+    # the real axis is refined as two real poles (output_error.split_near_real_pairs; random helmet 17: 44 -> 20
+    # evaluations of the 10 s block, to a lower cost).
     oe = refine_output_error(pick.A, pick.B, pick.C, pick.D, block, feedthrough=options.feedthrough, max_iterations=60,
-                             noise_tolerance=True)
+                             noise_tolerance=True, split_near_real=True)
     A, B, C, D = oe.A, oe.B, oe.C, oe.D
     rms = time_rms(oe, delay)
     if rms > pick_rms:

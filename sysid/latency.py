@@ -89,11 +89,11 @@ import numpy as np
 
 from . import lti
 from .lines import find_lines, fit_sinusoids
-from .output_error import block_data, linear_cost, refine_output_error
+from .output_error import block_data, linear_cost, radius_bound_mask, refine_output_error
 from .recordings import Recording
 from .spectra import Spectra
 
-__all__ = ["LatencyEstimate", "estimate_latency", "refine_delay", "walk_delay", "DelayWalk", "compensate_delay",
+__all__ = ["LatencyEstimate", "estimate_latency", "refine_delay", "walk_delay", "decide_delay", "DelayWalk", "compensate_delay",
            "SPEED_OF_SOUND", "delay_centimetres"]
 
 SPEED_OF_SOUND = 343.0  # m/s in air at 20 degrees C
@@ -106,12 +106,12 @@ _PLAUSIBLE = 0.10
 _REFIT_ITERATIONS = 10
 # walk_delay: samples it may move from refine_delay's answer (further when the band's kernel lead is longer).
 _WALK_SPAN = 12
-# walk_delay's tolerance in output-noise variances sigma^2 = V / (2 M) (M bins). Past the answer a smoothly starting
-# response (two roll-offs: the lost first samples' energy grows as k^5) costs a few sigma^2 a sample (random helmet 77,
-# short: 1.8, 3.9, 5.9, 9.7 sigma^2 at 1-4 samples past the smallest cost, the true delay one past it), and one sample
-# past the true delay cost 5.1-6.6 sigma^2 on helmets 2 and 62 (short) and 13 (thesis length, whose model there
-# validated at 1.33x against 1.03x one sample shorter). refine_delay's 40 sigma^2 is for fixed poles, which wander more.
-_WALK_NOISE = 5.0
+# walk_delay walks up until a cost rises this many output-noise variances sigma^2 = V / (2 M) (M bins) above the
+# smallest (past the true delay the cost rises by 3 % to 20x a sample where the response's first sample is not small,
+# thousands of sigma^2), and refits again from the best core's poles the delays within it.
+_WALK_CLEAR = 20.0
+# walk_delay's decision (``_decided``): up from the smallest cost through costs within this many sigma^2 of it.
+_WALK_STEP = 1.0
 
 
 def delay_centimetres(samples: float, fs: float) -> float:
@@ -221,9 +221,36 @@ def without_residual_lines(noise: Recording, band: tuple[float, float], A=None, 
                      noise.clipped_fraction, noise.dc_offset)
 
 
+def _causal_start(A, data, feedthrough: bool) -> np.ndarray:
+    """A with its poles at the block's radius bound replaced (``order_search.distinct_start``), as given when
+    it has none.
+
+    A core behind too long a delay imitates the lead it cannot have with poles run to z = -1 and residues that
+    cancel in band (random helmet 41, short session: 8 modes right and a real pole at -0.99998 behind a delay
+    read 12 for the true 10). Held fixed, or refitted from there behind a shorter delay, those poles stay where
+    the longer delay put them: refitted from them for 10 iterations the cost at the true delay was 2.7 times the
+    one at 11; from the same poles with the bound one replaced, 0.56 times (and 1.0 at 9).
+    """
+    from .order_search import distinct_start  # order_search is built on output_error like this module
+
+    A = np.asarray(A, dtype=float)
+    poles = np.linalg.eigvals(A)
+    if not radius_bound_mask(poles, data).any():
+        return A
+    return lti.real_block_diagonal(distinct_start(poles, data, feedthrough))
+
+
 def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float, max_extra: int = 4,
                  feedthrough: bool = False, widest: int = 12, delay: int = 0,
                  lines_out: bool = False) -> tuple[int, np.ndarray]:
+    """Samples j to add to the delay and the costs that decided it (``_refine_delay``; see there)."""
+    extra, costs, _ = _refine_delay(A, noise, band, seconds, max_extra, feedthrough, widest, delay, lines_out)
+    return extra, costs
+
+
+def _refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float, max_extra: int = 4,
+                  feedthrough: bool = False, widest: int = 12, delay: int = 0,
+                  lines_out: bool = False) -> tuple[int, np.ndarray, dict]:
     """Samples j in -widest..widest to add to the delay of a core with poles eig(A) fitted on
     ``noise`` (already advanced by the current delay), and the costs V of the window that decided
     it, lowest j first (from j = 0 unless the delay was shortened); see the module docstring.
@@ -239,9 +266,12 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
     only roughly), the poles are refitted at j <= 0, or at the answer and the dips
     (``output_error.refine_output_error``, _REFIT_ITERATIONS), and the refitted costs decide
     (infinite where not refitted). ``lines_out``: ``noise`` is already ``without_residual_lines``'s.
+    Poles at the block's radius bound are replaced first (``_causal_start``). Also returns the refitted
+    cores (j -> ``output_error.OutputErrorFit``; empty when none was refitted).
     """
     if not lines_out:
         noise = without_residual_lines(noise, band, A, seconds, feedthrough)
+    A = _causal_start(A, block_data(noise, band, seconds), feedthrough)
 
     def block(j):
         return block_data(compensate_delay(noise, j), band, seconds)
@@ -276,14 +306,16 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
         rising = np.maximum.accumulate(np.where(shifts >= extra, costs, 0.0))
         dips = (shifts > extra) & (costs * tolerance < rising) & (costs <= costs.min() * (1 + _PLAUSIBLE))
         if not dips.any():
-            return extra, costs
+            return extra, costs, {}
         refit_at = shifts[dips | (shifts == extra)]
     # Held fixed, the poles cannot tell: refitted, the spare ones take up what the delay line leaves.
     n = A.shape[0]
     refit = np.full(costs.size, np.inf)
+    fits = {}
     for j in refit_at:
-        refit[j - shifts[0]] = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block(j),
-                                                   feedthrough=feedthrough, max_iterations=_REFIT_ITERATIONS).cost_after
+        fits[int(j)] = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block(j),
+                                           feedthrough=feedthrough, max_iterations=_REFIT_ITERATIONS)
+        refit[j - shifts[0]] = fits[int(j)].cost_after
     if read_long:
         # Read long, the core behind the onset had no spare poles: the refitted cost is smallest where
         # the core is causal again, and the longer delays within the tolerance are a slowly starting
@@ -294,8 +326,8 @@ def refine_delay(A, noise: Recording, band: tuple[float, float], seconds: float,
         # helmet 100 FF with a pure delay of 16 and an engine order: refitted 1.0003, 1, 1, 1.0007, 1.0042
         # at j = -4..0 from an onset 7 samples long, the smallest at -2 read 25 where at most 24 holds
         # the plant's delay and roll-offs).
-        return int(shifts[np.flatnonzero(refit <= refit.min() * tolerance)[0]]), refit
-    return int(shifts[np.flatnonzero(refit <= refit.min() * tolerance)[-1]]), refit
+        return int(shifts[np.flatnonzero(refit <= refit.min() * tolerance)[0]]), refit, fits
+    return int(shifts[np.flatnonzero(refit <= refit.min() * tolerance)[-1]]), refit, fits
 
 
 @dataclass(frozen=True)
@@ -312,8 +344,9 @@ class DelayWalk:
 
 def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, start: int, feedthrough: bool = False,
                lead: int = 0, long_seconds: float | None = None, cleaned: Recording | None = None) -> DelayWalk:
-    """The largest delay d >= 0 (samples added to the one taken out of ``noise``) whose core, refitted, costs
-    within _WALK_NOISE / (2 M) of the smallest refitted cost (M bins), found by walking one sample at a time from
+    """The delay d >= 0 (samples added to the one taken out of ``noise``) whose core, refitted, holds the
+    delay: up from the smallest refitted cost through costs within _WALK_STEP noise variances of it
+    (``_decided``), found by walking one sample at a time from
     ``start`` (``refine_delay``'s answer) up and down to at most max(_WALK_SPAN, ``lead``) samples either side
     (``lead``: the band-limited kernel's lead, fs / (2 f_top) samples, how far short the onset may read);
     where that lead is longer than _WALK_SPAN, the walk is done again on ``long_seconds`` from its answer.
@@ -321,16 +354,19 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
 
     At each delay the poles are refitted (``output_error.refine_output_error``, _REFIT_ITERATIONS, stopped at
     the noise's tolerance) from those of the neighbouring delay: a continuation, so each refit starts one
-    sample from its answer. Upwards the walk goes on while the cost stays within the tolerance of the smallest
-    so far, downwards while the cost still falls.
+    sample from its answer. Upwards the walk goes on until the cost rises _WALK_CLEAR sigma^2 above the
+    smallest so far, downwards while the cost still falls; then the delays within _WALK_CLEAR of the smallest
+    are refitted once more from the best core's poles (the walk's far end has had more iterations).
+    Poles at the block's radius bound are replaced first (``_causal_start``).
 
-    Why the largest: the data fix the in-band response H = z^-d G, and a shorter delay line leaves the core
+    Why up from the smallest: the data fix the in-band response H = z^-d G, and a shorter delay line leaves the core
     G to imitate the missing samples by an all-pass-like lag (zeros outside the unit circle, Pade-like),
     which a core with spare poles does within the noise over a band-limited recording. A longer delay than
     the true one asks the core for a lead no causal, stable core has (its phase lags the minimum phase of
     its magnitude: Oppenheim & Schafer, 3rd ed., sec. 5.6), and it loses the response's first samples, so
-    its cost rises. The largest delay within the noise is the core with the least excess phase, the pure
-    delay. A core with zeros of its own outside the unit circle (residues of either sign) keeps them: their
+    its cost rises. The longest delay whose cost stays within the noise is the core with the least excess
+    phase, the pure delay; where the rise past it is within the noise too (a smooth start), shorter is the safe
+    side (``_decided``). A core with zeros of its own outside the unit circle (residues of either sign) keeps them: their
     lag starts at the response's first sample, which a longer delay line would cut.
 
     Held fixed, the picked core's poles cannot show this when they imitate the missing samples together
@@ -339,11 +375,12 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     tolerance on fixed-pole costs that are flat to the last sample reads the largest of them (77: 3 samples
     long with a fixed-pole cost at 1.0038 against the tolerance 1.004; refitted, that delay costs 1.0078).
     A response that starts smoothly (roll-offs) is read long by part of their lag, fs / (2 pi f_c) samples
-    each: the tolerance (_WALK_NOISE) is a sample's cost there, not refine_delay's.
+    each, by any tolerance larger than a sample's cost there (a sigma^2 or two).
     """
     if cleaned is None:
         cleaned = without_residual_lines(noise, band, A, seconds, feedthrough)
-    tolerance = 1 + _WALK_NOISE / (2 * block_data(noise, band, seconds).z.size)
+    bins = 2 * block_data(noise, band, seconds).z.size
+    clear = 1 + _WALK_CLEAR / bins
 
     def refit(A0, j, recording=None):
         n = A0.shape[0]
@@ -352,22 +389,30 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
                                    feedthrough=feedthrough, max_iterations=_REFIT_ITERATIONS, noise_tolerance=True)
 
     start, span = max(int(start), 0), max(_WALK_SPAN, int(lead))
-    fits = {start: refit(np.asarray(A, dtype=float), start)}
+    A = _causal_start(A, block_data(compensate_delay(noise, start), band, seconds), feedthrough)
+    fits = {start: refit(A, start)}
     if cleaned is not noise:
         # Lines taken out lower a refitted core's cost when they are a hum; a lightly damped mode the core's
         # one linear step misfits is found as lines too (random helmet 9, thesis length: three at 30.7-31.1 Hz
         # beside its 31 Hz mode of Q 20), and taken out it leaves data no core fits (refitted cost 30 times the
-        # recording's own, every delay then read from a degenerate fit). The recording that fits better is walked.
-        other = refit(np.asarray(A, dtype=float), start, cleaned)
+        # recording's own, every delay then read from a degenerate fit, delay -3; now +0). The recording that
+        # fits better is walked.
+        other = refit(A, start, cleaned)
         if other.cost_after < fits[start].cost_after:
             noise, fits = cleaned, {start: other}
-    # Up while the cost stays within the tolerance of the smallest; down while it still falls (a lower
-    # cost below the start can only take the answer down; a flat one cannot change it).
+
+    def smallest():
+        return min(f.cost_after for f in fits.values())
+
+    # Up until the cost rises clearly above the smallest so far (a refit one sample on may sit a few sigma^2
+    # above its neighbours and the next ones fall again: random helmet 51, slow test's grid, a 20-state core 3
+    # samples short, refitted 21 -> 22 rose by 7 sigma^2, and 24, the true delay, was 28 below 21); down while
+    # the cost still falls.
     j = start
     while j < start + span:
         j += 1
         fits[j] = refit(fits[j - 1].A, j)
-        if fits[j].cost_after > min(f.cost_after for f in fits.values()) * tolerance:
+        if fits[j].cost_after > smallest() * clear:
             break
     j = start
     while j > max(start - span, 0):
@@ -375,9 +420,18 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
         fits[j] = refit(fits[j + 1].A, j)
         if fits[j].cost_after >= fits[j + 1].cost_after:
             break
-    costs = {j: f.cost_after for j, f in sorted(fits.items())}
-    smallest = min(costs.values())
-    extra = max(j for j, c in costs.items() if c <= smallest * tolerance)
+    # Each refit of the walk starts from its neighbour's answer, so the fits further along have had more
+    # iterations: the walk's far end reads lower than the delays it passed (random helmet 57, thesis length: 10
+    # sigma^2 between 61-64 and 66, which refitted alike from the picked core differ by less than 1). Every
+    # delay that could decide is refitted again from the best core's poles, and the lower cost kept.
+    best = min(fits, key=lambda k: fits[k].cost_after)
+    for k in sorted(fits):
+        if k != best and fits[k].cost_after <= smallest() * clear:
+            again = refit(fits[best].A, k)
+            if again.cost_after < fits[k].cost_after:
+                fits[k] = again
+    costs = {k: f.cost_after for k, f in sorted(fits.items())}
+    extra = _decided(costs, bins)
     if lead > _WALK_SPAN and long_seconds is not None and long_seconds > seconds:
         # A narrow coherent band (the kernel's lead past the span): the scan block's bins above it are noise, the
         # refitted costs there wander by as much as a few samples of delay cost, and ``long_seconds`` decide from
@@ -385,3 +439,47 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
         # for 25 by the tolerance; on 10 s the costs are flat to 26 within 0.5 sigma^2 and 60 sigma^2 up at 28).
         return walk_delay(fits[extra].A, noise, band, long_seconds, extra, feedthrough, cleaned=noise)
     return DelayWalk(extra, fits[extra].A, costs, fits)
+
+
+def decide_delay(A, noise: Recording, band: tuple[float, float], seconds: float, delay: int = 0,
+                 feedthrough: bool = False, lead: int = 0, long_seconds: float | None = None,
+                 cleaned: Recording | None = None) -> DelayWalk:
+    """Samples to add to the delay of a core with poles eig(A) fitted on ``noise`` (already advanced by the
+    ``delay`` it was fitted behind), and the refitted cores that decided it: the one place the delay is decided
+    (``identify`` after its order search, ``refits`` after a data correction).
+
+    ``refine_delay`` first (fixed-pole costs, the window below the onset when it read long); read long
+    (extra < 0), its refitted costs decided and its refits are returned; read short or right, ``walk_delay``
+    settles it from there. ``cleaned``: ``without_residual_lines(noise, band, A, seconds, feedthrough)`` when
+    already at hand. Costs are those of the refitted cores (j -> V).
+    """
+    if cleaned is None:
+        cleaned = without_residual_lines(noise, band, A, seconds, feedthrough)
+    extra, costs, fits = _refine_delay(A, cleaned, band, seconds, feedthrough=feedthrough, delay=delay,
+                                       lines_out=True)
+    if extra < 0:
+        return DelayWalk(extra, fits[extra].A, {j: f.cost_after for j, f in sorted(fits.items())}, fits)
+    return walk_delay(A, noise, band, seconds, extra, feedthrough, lead, long_seconds, cleaned)
+
+
+def _decided(costs: dict[int, float], bins: int) -> int:
+    """The delay (samples -> refitted cost V) the walk settles on: from the smallest cost, up through the
+    delays whose cost stays within _WALK_STEP noise variances sigma^2 = V / ``bins`` (real residuals) of it,
+    one sample at a time; the last of them.
+
+    Below the true delay a core with spare poles imitates the missing samples nearly free, so the costs
+    there are flat and the smallest may fall a sample or two short; past it a core loses the response's first
+    samples and the cost rises, by 3 % to 20x a sample where the first sample is not small, by only a sigma^2
+    or two a sample where the response starts smoothly (roll-offs: it starts as t^2), where the costs cannot
+    tell a longer delay from the true one. Taking the largest delay within 5 sigma^2 of the smallest read
+    those long (random helmet 57, short: 1.9, 0, 1.1, 1.4, 7.9 sigma^2 at delays 63-67, two roll-offs at 5.1 and
+    5.7 kHz, true 62: 66; 17: 3.3, 0, 1.3, 2.1 at 17-20, true 17: 20); through costs within one sigma^2 (what
+    a parameter fitted to noise alone gains) it errs short instead (64 and 18). Over the 100 short random
+    helmets' walks the error of the decision ranges -2..+2 (largest within 5 sigma^2: 0..+4).
+    """
+    smallest = min(costs, key=costs.get)
+    limit = costs[smallest] * (1 + _WALK_STEP / bins)
+    j = smallest
+    while j + 1 in costs and costs[j + 1] <= limit:
+        j += 1
+    return j

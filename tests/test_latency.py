@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from sysid import lti
-from sysid.latency import (compensate_delay, delay_centimetres, estimate_latency, refine_delay, walk_delay,
-                           without_residual_lines)
+from sysid.latency import (compensate_delay, decide_delay, delay_centimetres, estimate_latency, refine_delay,
+                           walk_delay, without_residual_lines)
 from sysid.model import Model
 from sysid.output_error import block_data, linear_cost, refine_output_error
 from sysid.random_plant import random_plant, random_session
@@ -130,6 +130,22 @@ class TestRefineDelay:
         assert extra == 3
         assert np.argmin(costs) == 3 and np.isinf(costs).any()
 
+    def test_a_lead_imitated_by_a_pole_at_the_bound_is_read_short_again(self):
+        # Random helmet 41 (a 71 Hz high-pass, a 9.6 kHz roll-off) behind a delay read 2 samples long: a core
+        # fitted there with a pole started at z = -1 keeps it at the block's radius bound, imitating the lead
+        # it cannot have. Refitted from those poles below the onset's delay the core stayed where the long delay
+        # put it and the delay read 1 long; with the bound pole replaced first it is read short again, never long.
+        rp, body = _behind_delay(41, 2)
+        A = lti.real_block_diagonal(np.concatenate([np.linalg.eigvals(rp.model.A), [-0.99999]]))
+        n = A.shape[0]
+        fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block_data(body, BAND, 1.0),
+                                  max_iterations=20)
+        assert np.max(np.abs(np.linalg.eigvals(fit.A))) > 0.9999
+        decision = decide_delay(fit.A, body, BAND, 1.0, delay=rp.delay + 2)
+        assert -4 <= decision.extra <= -2
+        # The refitted cores below the onset's delay come back with the decision (identify starts from them).
+        assert decision.extra in decision.fits and set(decision.costs) == set(decision.fits)
+
     def test_a_delay_already_right_stays(self):
         rp, body = _behind_delay(0, 0)
         extra, costs = refine_delay(rp.model.A, body, BAND, 1.0)
@@ -159,6 +175,22 @@ class TestWalkDelay:
         assert np.sum(np.abs(zeros) > 1) >= 4
         walk = walk_delay(rp.model.A, body, BAND, 1.0, start=0)
         assert walk.extra == 0 and walk.costs[1] > walk.costs[0] * 1.01
+
+    def test_a_smoothly_starting_response_is_not_read_long(self):
+        # Random helmet 57: two roll-offs at 5.1 and 5.7 kHz (44.1 kHz), so the response starts as t^2 and a
+        # longer delay line loses first samples too small to tell; a core with three spare poles behind the true
+        # delay. Refitted, the costs rise by less than a sigma^2 a sample for 8 samples, then by 20: the largest
+        # delay within 5 sigma^2 of the smallest read 8 samples long. Through costs within the noise of a single
+        # parameter the walk errs short.
+        rp, body = _behind_delay(57, 0)
+        A = _with_spare_poles(rp, [0.3, -0.3, 0.0])
+        n = A.shape[0]
+        fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block_data(body, BAND, 1.0),
+                                  max_iterations=20)
+        walk = walk_delay(fit.A, body, BAND, 1.0, start=0)
+        sigma2 = min(walk.costs.values()) / (2 * block_data(body, BAND, 1.0).z.size)
+        assert max(walk.costs[j] for j in range(6)) - min(walk.costs.values()) < 5 * sigma2
+        assert 0 <= walk.extra <= 2
 
 
 def test_compensate_delay_aligns_the_ear_signal():
