@@ -107,10 +107,6 @@ _GRAM_CONDITION = 1e5
 # Distance (relative to the unit column norm) from the span of the other columns below which a column is
 # tried as dependent (``_Factor``): Gram-matrix pivoting resolves distances down to about sqrt(eps).
 _DEPENDENT_DISTANCE = 1e-6
-# Largest condition number of a regressor factored by CholeskyQR2 (``_cholesky_qr2``): its unit-norm columns
-# are then at least 1/kappa > _DEPENDENT_DISTANCE from each other's span, none is dropped, and of the
-# scan's ill-conditioned regressors most fall below it (229 of 360 on random helmet 4, thesis length).
-_CHOLESKY_QR2_CONDITION = 1e6
 _UNIT_ROUNDOFF = np.finfo(float).eps / 2
 
 
@@ -168,7 +164,9 @@ def split_near_real_pairs(poles: np.ndarray, margin: float = _STABLE) -> np.ndar
     plane, so a pair the data want as two distinct real poles (two roll-off corners) runs to theta = 0
     and stays there. The two real poles have decay rates (1 +- _NEAR_REAL_SPLIT) d (inside the decay
     bound ``margin`` when the pair is): the response moves by O(_NEAR_REAL_SPLIT^2), and from there
-    the same block took 20 evaluations to a lower cost (3258.5 against 3258.9).
+    the same block took 20 evaluations to a lower cost (3258.5 against 3258.9). ``identify`` asks for it
+    in the final refinement only: every refit of the order search and the delay steps split too sends
+    their chains elsewhere (random helmet 6, thesis length: n 16 and 6.4 s of CPU against n 14, 4.5 s).
     """
     poles = np.asarray(poles, dtype=complex)
     decay = -np.log(np.maximum(np.abs(poles), 1e-300))
@@ -274,24 +272,6 @@ def _shifted_cholesky_qr(matrix: np.ndarray, gram: np.ndarray) -> tuple[np.ndarr
     return q, r
 
 
-def _cholesky_qr2(matrix: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Thin (Q, R) of ``matrix`` by CholeskyQR2 from R1, the Cholesky factor of its Gram matrix (None
-    where the second Cholesky step fails).
-
-    Q1 = X R1^-1 loses about u kappa^2 of orthogonality; one more step (R2 the Cholesky factor of
-    Q1^T Q1, Q = Q1 R2^-1, R = R2 R1) brings Q to orthogonality and X - Q R to order u for kappa up to
-    about u^-1/2 (Yamamoto, Nakatsukasa, Yanagisawa, Fukaya, "Roundoff error analysis of the CholeskyQR2
-    algorithm", Electron. Trans. Numer. Anal. 44, 2015): a Gram matrix, a Cholesky factor and a
-    triangular solve fewer than ``_shifted_cholesky_qr``'s three steps. Used below
-    _CHOLESKY_QR2_CONDITION, where no column lies within _DEPENDENT_DISTANCE of the others' span.
-    """
-    q = blas.dtrsm(1.0, r, matrix, side=1)
-    step, info = lapack.dpotrf(q.T @ q, lower=0, clean=1)
-    if info != 0:
-        return None
-    return blas.dtrsm(1.0, step, q, side=1, overwrite_b=1), step @ r
-
-
 class _Factor:
     """Thin QR factors Phi = Q R of a tall regressor with unit-norm columns, and least squares by them.
 
@@ -304,7 +284,6 @@ class _Factor:
     iterative refinement on the true residual (Bjorck, Numerical Methods for Least Squares
     Problems, 1996, sec. 2.9).
 
-    Below _CHOLESKY_QR2_CONDITION, Q and R by CholeskyQR2 from that Cholesky factor (``_cholesky_qr2``).
     Otherwise the columns are first split by a Cholesky factorisation of the Gram matrix with
     diagonal pivoting (LAPACK dpstrf; Higham, "Accuracy and Stability of Numerical Algorithms",
     2002, sec. 10.3): the columns kept, Phi_1, and those whose distance from the span of the kept
@@ -334,14 +313,11 @@ class _Factor:
         gram = matrix.T @ matrix
         try:
             r = scipy.linalg.cholesky(gram, lower=False, check_finite=False)
-            condition = np.linalg.cond(r)
+            implicit = bool(np.linalg.cond(r) < _GRAM_CONDITION)
         except np.linalg.LinAlgError:
-            r, condition = None, np.inf
-        factors = _cholesky_qr2(matrix, r) if _GRAM_CONDITION <= condition < _CHOLESKY_QR2_CONDITION else None
-        if condition < _GRAM_CONDITION:
+            implicit = False
+        if implicit:
             self.r = r
-        elif factors is not None:
-            self.q, self.r = factors
         elif not self._split(matrix, gram):
             self.q, self.r = scipy.linalg.qr(matrix, mode="economic", check_finite=False)
 
@@ -521,12 +497,24 @@ class _Projection:
     def __init__(self, problem: _Problem, pairs: int, full: bool = True):
         self.problem, self.pairs, self._full = problem, pairs, full
         self.margin = decay_bound(problem.data)
-        self._x = None
+        self._x, self._previous = None, None
         self._jacobian_at = None
 
+    _STATE = ("_x", "_poles", "_factor", "_scale", "_theta", "_residual")
+
     def _solve(self, x):
+        """The linear least squares at x, kept for the last two points: MINPACK's result is its last
+        accepted point, often followed by a rejected trial, and ``linear`` asks for it again."""
         if self._x is not None and np.array_equal(x, self._x):
             return
+        if self._previous is not None and np.array_equal(x, self._previous[0]):
+            current = tuple(getattr(self, name) for name in self._STATE)
+            for name, value in zip(self._STATE, self._previous):
+                setattr(self, name, value)
+            self._previous = current
+            return
+        if self._x is not None:
+            self._previous = tuple(getattr(self, name) for name in self._STATE)
         poles = _params_to_poles(x, self.pairs, self.margin)
         _, _, real, scale, rhs = self.problem.regression(poles)
         factor, scaled = _qr_solve(real, rhs)
@@ -621,7 +609,7 @@ class _Projection:
 
 def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough: bool = False,
                         max_iterations: int = 60, prefilter: np.ndarray | None = None,
-                        noise_tolerance: bool = False) -> OutputErrorFit:
+                        noise_tolerance: bool = False, split_near_real: bool = False) -> OutputErrorFit:
     """Refine a stable model's poles and zeros on raw DFT data; see the module docstring.
 
     The returned model is balanced (``lti.balanced_realisation``).
@@ -632,6 +620,9 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
     ftol; otherwise 1e-8). On the final 10 s block of random helmet 5 (thesis-length session,
     order 17) the cost fell 0.29 % in 10 iterations, then 4e-6 more in 50 (18 s of CPU),
     the validation rms 1.016x the floor throughout.
+
+    ``split_near_real`` refines every nearly real pair of the start as two real poles
+    (``split_near_real_pairs``).
 
     ``prefilter`` (complex response at the data's bins) is a fixed factor F in series
     in front of the fitted system: the fit is of Y = G F z^-d U, and the returned
@@ -644,7 +635,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
         raise IdentificationError("output-error refinement needs a stable starting model")
     problem = _Problem(data, delay, feedthrough, prefilter)
     margin = decay_bound(data)
-    params, pairs = _poles_to_params(split_near_real_pairs(poles, margin), margin)
+    params, pairs = _poles_to_params(split_near_real_pairs(poles, margin) if split_near_real else poles, margin)
     projection = _Projection(problem, pairs)
 
     # MINPACK's lmder (Levenberg-Marquardt, scaled by the Jacobian's column norms) through ``leastsq``, as
