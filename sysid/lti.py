@@ -418,11 +418,19 @@ def _square_root_balance(A, B, C, D, reference: np.ndarray, z: np.ndarray, rtol:
     A complex realisation (``chained_realisation``) balances to a real system's balanced realisation
     times a diagonal of unit phases (for distinct Hankel singular values): the phases that make B real
     and positive leave it real, and its imaginary round-off is dropped (the response check decides)."""
+    complex_input = np.iscomplexobj(A) or np.iscomplexobj(B) or np.iscomplexobj(C)
+    # The conjugate transpose; a real system's steps exactly as for a real one (the same products in the
+    # same memory layout, so the same last bits: the output-error fits that follow amplify them).
+    H = (lambda M: M.conj().T) if complex_input else (lambda M: M.T)
     try:
-        wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.conj().T)
-        wo = scipy.linalg.solve_discrete_lyapunov(A.conj().T, C.conj().T @ C)
-        lc, lo = _gramian_factor((wc + wc.conj().T) / 2), _gramian_factor((wo + wo.conj().T) / 2)
-        u, s, vt = np.linalg.svd(lo.conj().T @ lc)
+        if complex_input:
+            wc = scipy.linalg.solve_discrete_lyapunov(A, B @ H(B))
+            wo = scipy.linalg.solve_discrete_lyapunov(H(A), H(C) @ C)
+            wc, wo = (wc + H(wc)) / 2, (wo + H(wo)) / 2
+        else:
+            wc, wo = gramians(A, B, C)
+        lc, lo = _gramian_factor(wc), _gramian_factor(wo)
+        u, s, vt = np.linalg.svd(H(lo) @ lc)
     except (np.linalg.LinAlgError, ValueError, scipy.linalg.LinAlgError):
         return None
     if not np.all(np.isfinite(s)) or s[0] <= 0:
@@ -431,10 +439,10 @@ def _square_root_balance(A, B, C, D, reference: np.ndarray, z: np.ndarray, rtol:
     if s[keep - 1] < 1e-13 * s[0]:
         return None
     root = 1.0 / np.sqrt(s[:keep])
-    T = lc @ vt[:keep].conj().T * root[None, :]
-    T_inv = root[:, None] * (u[:, :keep].conj().T @ lo.conj().T)
+    T = lc @ H(vt[:keep]) * root[None, :]
+    T_inv = root[:, None] * (H(u[:, :keep]) @ H(lo))
     Ab, Bb, Cb = T_inv @ A @ T, T_inv @ B, C @ T
-    if np.iscomplexobj(Ab):
+    if complex_input:
         phase = np.exp(-1j * np.angle(Bb[:, 0]))
         Ab, Bb, Cb = (phase[:, None] * Ab * np.conj(phase)[None, :]).real, (phase[:, None] * Bb).real, \
             (Cb * np.conj(phase)[None, :]).real
