@@ -329,13 +329,13 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
             moved, moved_rms = None, np.inf
             # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
             # _FREED_ORDERS poles, one at a time, below.
-            # Read long, no pole was spent on delay, but the pick's were spent on imitating a lead (poles run to
-            # z = -1): the next higher orders of the scan, fitted on the same long delay, may hold the structure the
-            # lead displaced (random helmet 41, short: the high-pass pole missing from the pick at n 17, delay 12).
-            near = (range(pick.order - _FREED_ORDERS, pick.order) if extra > 0 else
-                    range(pick.order + 1, pick.order + _FREED_ORDERS + 1))
+            # Read long, the pick's poles were spent on imitating a lead (poles run to z = -1): the next higher
+            # orders of the scan may hold the structure the lead displaced (random helmet 41, short: the high-pass
+            # pole missing from the pick at n 17, delay 12), and the lower ones stay (94, short: n 6 for 6, 5.7x
+            # from the pick's own order and higher ones alone).
+            near = range(pick.order - _FREED_ORDERS, pick.order + (_FREED_ORDERS + 1 if extra < 0 else 0))
             starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
-                      for c in [pick, *[c for c in candidates if c.order in near]]]
+                      for c in [pick, *[c for c in candidates if c.order in near and c is not pick]]]
             if extra in walked.fits:
                 # And from the walk's poles at that delay (refine_output_error uses only the poles): refitted there
                 # from the neighbouring delay's, they may sit in another minimum than the pick's own refit reaches.
