@@ -8,7 +8,7 @@ import pytest
 from sysid import lti
 from sysid.output_error import block_data, decay_bound, radius_bound_mask
 from sysid.recordings import Recording
-from sysid.reduction import is_balanced, without_degenerate_states
+from sysid.reduction import is_balanced, truncation_orders, without_degenerate_states
 
 FS = 8000.0
 BAND = (20.0, 3000.0)
@@ -89,3 +89,48 @@ def test_states_no_balanced_realisation_holds_are_truncated_without_a_refit(sess
     assert max(np.abs(reduced.A).max(), np.abs(reduced.B).max(), np.abs(reduced.C).max()) < 1.0 + 1e-9
     h_modal, h = lti.frequency_response(A, B, C, 0.0, Z), lti.frequency_response(reduced.A, reduced.B, reduced.C, reduced.D, Z)
     assert np.max(np.abs(h - h_modal)) < 1e-7 * np.max(np.abs(h_modal))
+
+
+def test_truncation_orders_are_the_lowest_whose_removed_values_sum_below_each_fraction():
+    hsv = np.array([1.0, 0.5, 0.1, 5e-4, 3e-4, 2e-5, 1e-5])
+    # Removed from order 3: 8.3e-4 <= 1e-3; from order 5: 3e-5 <= 1e-4.
+    assert truncation_orders(hsv) == [3, 5]
+    assert truncation_orders(np.array([1.0, 0.5, 0.1])) == []
+
+
+def _with_faint_mode(plant, residue):
+    """The plant beside a 2.5 kHz mode of Q 5 whose residue is ``residue``, balanced."""
+    p = np.exp(2 * np.pi * 2500.0 / FS * (-1 / 10 + 1j))
+    A = np.zeros((6, 6))
+    A[:4, :4], A[4:, 4:] = plant[0], lti.real_block_diagonal(np.array([p, np.conj(p)]))
+    B = np.vstack([plant[1], [[residue], [0.0]]])
+    C = np.hstack([plant[2], [[1.0, 0.0]]])
+    return lti.balanced_realisation(A, B, C, plant[3])
+
+
+def test_a_state_the_validation_does_not_miss_is_truncated(session):
+    plant, block, validate, calls = session
+    model = _with_faint_mode(plant, 1e-5)
+    rms = validate(SimpleNamespace(A=model[0], B=model[1], C=model[2], D=model[3]))
+    calls.clear()
+    reduced = without_degenerate_states(*model, rms, block, validate, min_gain=0.03)
+    assert reduced.A.shape == (4, 4) and reduced.removed == "balanced truncation 6 -> 4"
+    assert len(calls) == 1 and reduced.rms <= 1.01 * rms
+    assert is_balanced(reduced.A, reduced.B, reduced.C)
+    h, h_full = (lti.frequency_response(*m, Z) for m in ((reduced.A, reduced.B, reduced.C, reduced.D), model))
+    assert np.max(np.abs(h - h_full)) < 1e-3 * np.max(np.abs(h_full))
+
+
+def test_a_truncation_the_validation_rejects_is_not_kept(session):
+    plant, block, _, _ = session
+    model = _with_faint_mode(plant, 1e-5)
+    # A validation that sees the faint mode: every truncation validates 10 % worse.
+    calls = []
+
+    def validate(candidate):
+        calls.append(candidate)
+        return 1.1e-3
+
+    reduced = without_degenerate_states(*model, 1e-3, block, validate, min_gain=0.03)
+    assert reduced.A.shape == (6, 6) and reduced.removed == "" and len(calls) >= 1
+    np.testing.assert_array_equal(reduced.A, model[0])
