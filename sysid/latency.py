@@ -360,7 +360,8 @@ class DelayWalk:
 
 
 def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, start: int, feedthrough: bool = False,
-               lead: int = 0, long_seconds: float | None = None, cleaned: Recording | None = None) -> DelayWalk:
+               lead: int = 0, long_seconds: float | None = None, cleaned: Recording | None = None,
+               refit_again: bool = True) -> DelayWalk:
     """The delay d >= 0 (samples added to the one taken out of ``noise``) whose core, refitted, holds the
     delay: up from the smallest refitted cost through costs within _WALK_STEP noise variances of it
     (``_decided``), found by walking one sample at a time from
@@ -373,7 +374,8 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     the noise's tolerance) from those of the neighbouring delay: a continuation, so each refit starts one
     sample from its answer. Upwards the walk goes on until the cost rises _WALK_CLEAR sigma^2 above the
     smallest so far, downwards while the cost still falls; then the delays within _WALK_CLEAR of the smallest
-    are refitted once more from the best core's poles (the walk's far end has had more iterations).
+    are refitted once more from the best core's poles (the walk's far end has had more iterations), unless
+    ``refit_again`` is false or a longer block decides next.
     It starts from the better of the poles as given and with those at the block's radius bound replaced
     (``_causal_start``).
 
@@ -448,20 +450,24 @@ def walk_delay(A, noise: Recording, band: tuple[float, float], seconds: float, s
     # iterations: the walk's far end reads lower than the delays it passed (random helmet 57, thesis length: 10
     # sigma^2 between 61-64 and 66, which refitted alike from the picked core differ by less than 1). Every
     # delay that could decide is refitted again from the best core's poles, and the lower cost kept.
+    # Not where a longer block decides next, nor on that block (10 s refits: 1.3 s more on random helmet 30, thesis
+    # length, whose costs there are flat within 0.5 sigma^2 without it).
+    longer = lead > _WALK_SPAN and long_seconds is not None and long_seconds > seconds
     best = min(fits, key=lambda k: fits[k].cost_after)
-    for k in sorted(fits):
+    for k in sorted(fits) if refit_again and not longer else []:
         if k != best and fits[k].cost_after <= smallest() * clear:
             again = refit(fits[best].A, k)
             if again.cost_after < fits[k].cost_after:
                 fits[k] = again
     costs = {k: f.cost_after for k, f in sorted(fits.items())}
     extra = _decided(costs, bins)
-    if lead > _WALK_SPAN and long_seconds is not None and long_seconds > seconds:
+    if longer:
         # A narrow coherent band (the kernel's lead past the span): the scan block's bins above it are noise, the
         # refitted costs there wander by as much as a few samples of delay cost, and ``long_seconds`` decide from
         # the scan block's answer (random helmet 30, thesis length, band to 360 Hz: the 1 s block read 21 or 29
         # for 25 by the tolerance; on 10 s the costs are flat to 26 within 0.5 sigma^2 and 60 sigma^2 up at 28).
-        return walk_delay(fits[extra].A, noise, band, long_seconds, extra, feedthrough, cleaned=noise)
+        return walk_delay(fits[extra].A, noise, band, long_seconds, extra, feedthrough, cleaned=noise,
+                          refit_again=False)
     return DelayWalk(extra, fits[extra].A, costs, fits)
 
 
