@@ -281,6 +281,24 @@ def _shifted_cholesky_qr(matrix: np.ndarray, gram: np.ndarray) -> tuple[np.ndarr
     return q, r
 
 
+def _condition_below(r: np.ndarray, limit: float) -> bool:
+    """Whether the 2-norm condition number of the upper triangular r is below ``limit``, as
+    ``np.linalg.cond(r) < limit`` but by bounds first: max|r_ii| / min|r_ii| <= cond_2(r) <= ||r||_F ||r^-1||_F
+    (the diagonal holds r's eigenvalues, and |lambda| lies between the extreme singular values), the
+    singular values only where the bounds straddle the limit. An SVD of a 46 x 46 factor took 340 us, the
+    bounds (one triangular inverse) 36 us; identify asks this of every regressor it factors (1015 on random
+    helmet 4, thesis length)."""
+    diagonal = np.abs(np.diag(r))
+    if not diagonal.size:
+        return True
+    if not np.all(np.isfinite(r)) or diagonal.min() == 0 or diagonal.max() >= limit * diagonal.min():
+        return False
+    inverse, info = lapack.dtrtri(r, lower=0)
+    if info == 0 and np.all(np.isfinite(inverse)) and np.linalg.norm(r) * np.linalg.norm(inverse) < limit:
+        return True
+    return bool(np.linalg.cond(r) < limit)
+
+
 class _Factor:
     """Thin QR factors Phi = Q R of a tall regressor with unit-norm columns, and least squares by them.
 
@@ -322,7 +340,7 @@ class _Factor:
         gram = matrix.T @ matrix
         try:
             r = scipy.linalg.cholesky(gram, lower=False, check_finite=False)
-            implicit = bool(np.linalg.cond(r) < _GRAM_CONDITION)
+            implicit = _condition_below(r, _GRAM_CONDITION)
         except np.linalg.LinAlgError:
             implicit = False
         if implicit:
@@ -363,7 +381,7 @@ class _Factor:
         sub_gram = gram[np.ix_(keep, keep)]
         try:
             r = scipy.linalg.cholesky(sub_gram, lower=False, check_finite=False)
-            implicit = bool(np.linalg.cond(r) < _GRAM_CONDITION)
+            implicit = _condition_below(r, _GRAM_CONDITION)
         except np.linalg.LinAlgError:
             implicit = False
         self.keep = keep

@@ -102,6 +102,19 @@ def test_the_jacobians_in_place_passes_give_the_bits_of_the_plain_expressions(rn
     assert np.array_equal(output_error._linear_in_theta(u, z, on_u, on_z), u * on_u + z * on_z)
 
 
+def test_the_condition_test_by_bounds_decides_as_the_singular_values(rng):
+    # Triangular factors of condition numbers 1 to 1e10 around the limit, singular ones and an empty one.
+    for exponent in np.linspace(0, 10, 41):
+        q, _ = np.linalg.qr(rng.standard_normal((12, 12)))
+        r = np.linalg.qr(q * np.logspace(0, -exponent, 12))[1]
+        for limit in (1e3, 1e5):
+            assert output_error._condition_below(r, limit) == (np.linalg.cond(r) < limit)
+    singular = np.triu(rng.standard_normal((4, 4)))
+    singular[2, 2] = 0.0
+    assert not output_error._condition_below(singular, 1e5)
+    assert output_error._condition_below(np.zeros((0, 0)), 1e5)
+
+
 def test_spare_poles_stay_within_what_the_block_resolves(rng):
     # A spare pair and two real poles started next to z = -1 and z = 1: out of the fitted band
     # nothing holds them; the decay bound keeps every pole at or inside what the block resolves.
