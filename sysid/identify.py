@@ -20,6 +20,11 @@
    the largest delay whose refit costs within the noise of the best), and the samples its
    core spent imitating delay move into the delay line (or back out of it) before the
    final refinement.
+6. States the data did not ask for leave (``reduction``): poles the final refinement parked at
+   the block's radius bound, states no balanced realisation of the full order holds, and the
+   balanced tail whose Hankel singular values sum to at most 1e-3 of the largest, each kept
+   out only when the validation rms stays within its tolerance (the provenance's
+   ``refinement.reduced`` says what left).
 
 Every model leaves balanced (``lti.balanced_realisation``): entries of order one,
 whatever the coordinates the subspace or output-error fit produced.
@@ -391,6 +396,6 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
                   identification=dict(provenance, method="latency, seed grid, then order search with output-error "
                                                          "refinement from several starts on raw DFT data",
                                       refinement={"start_gamma": gamma, "start": pick.start, "order": pick.order,
-                                                  "reflected_poles": pick.reflected,
+                                                  "reflected_poles": pick.reflected, "reduced": reduced.removed,
                                                   "block_seconds": block.length / body.fs, "order_scan": scan}))
     return model, rms, scan, extra
