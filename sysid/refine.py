@@ -149,9 +149,10 @@ def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, opti
     return _refinement(model, refined, spec.kind, params, extra, before, sweeps)
 
 
-# ``refine_corrections`` applies the clock correction first: the others are read on the ear signal it resamples.
+# ``refine_corrections`` applies a time-base correction (the clock) first: the others are read on the ear
+# signal it resamples.
 def _correction_rank(spec: EffectSpec) -> int:
-    return 0 if spec.kind == "clock-drift" else 1
+    return 0 if registry.get(spec.kind).time_base else 1
 
 
 def refine_corrections(model: Model, noise: Recording, sweeps: list[Recording], specs: list[EffectSpec],
@@ -160,7 +161,7 @@ def refine_corrections(model: Model, noise: Recording, sweeps: list[Recording], 
     """Apply several data corrections (effects of kind "correction": clock ratio, clipped stretches,
     output offset) and re-identify once, on data corrected for all of them (``sysid.refits.correct_data``).
 
-    One step in the history, its ``effect`` the corrections' names joined by "+" (the clock first),
+    One step in the history, its ``effect`` the corrections' names joined by "+" (a time-base one first),
     its ``params`` theirs together.
     """
     before = before or compare(model, sweeps)

@@ -8,7 +8,7 @@ from sysid.diagnose import DETECTORS
 from sysid.effect_spec import parse_effect
 from sysid.effects import Effect
 from sysid.errors import HelmetAncError
-from sysid.refine import NOT_REFINABLE, REFINE_EFFECTS, parse_refinement
+from sysid.refine import NOT_REFINABLE, REFINE_EFFECTS, _correction_rank, parse_refinement
 from sysid.report.diagnosis_figures import FIGURE_KINDS, FINDING_PLOTS
 from sysid.simulate import SIMULATED_EFFECTS, random_effect
 
@@ -60,6 +60,16 @@ def test_registration_is_checked():
         Effect(name="x-test", summary="x", figure="pie")
     with pytest.raises(HelmetAncError, match="unknown effect 'x-test'"):
         effects.get("x-test")
+    with pytest.raises(HelmetAncError, match="time_base belongs to a data correction"):
+        Effect(name="x-test", summary="x", time_base=True)
+
+
+def test_a_time_base_correction_is_applied_before_the_others():
+    # The clock resamples the ear signal the other corrections are read on (refine_corrections' order).
+    corrections = [e for e in map(effects.get, effects.names()) if e.correct is not None]
+    assert [e.name for e in corrections if e.time_base] == ["clock-drift"]
+    specs = [parse_refinement(name) for name in ("dc-offset", "clipping", "clock-drift")]
+    assert [s.kind for s in sorted(specs, key=_correction_rank)][0] == "clock-drift"
 
 
 def test_registered_restores_the_registry():

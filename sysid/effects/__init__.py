@@ -56,7 +56,9 @@ class Effect:
     "not-worse" (removes a bias the rms cannot show); ``not_refinable`` says why there is
     no structure. ``correct(model, noise, sweeps, params) -> (model, extra params)``: a data
     correction alone, the core kept (no re-identification); ``refine --auto`` applies every
-    pending correction this way before one re-identification (``sysid.refits.correct_data``).
+    pending correction this way before one re-identification (``sysid.refits.correct_data``);
+    ``time_base``: the correction resamples the recordings (a clock), so it is applied before
+    the other corrections, which are read on the signal it produces.
     ``factor(params, fs) -> (b, a)``: the effect is a linear factor in series with
     the plant (how ``simulate`` adds it; the other built-in effects act on the
     recordings and are simulated by ``sysid.simulate`` itself). ``random(rng) ->
@@ -76,6 +78,7 @@ class Effect:
     build: Callable | None = None
     complete: Callable | None = None
     correct: Callable | None = None
+    time_base: bool = False
     accept: str = "in-band"
     not_refinable: str = ""
     auto_params: Callable[[dict], dict] | None = None
@@ -93,6 +96,8 @@ class Effect:
             raise HelmetAncError(f"effect {self.name}: accept must be in-band, full-band or not-worse")
         if self.correct is not None and self.kind != "correction":
             raise HelmetAncError(f"effect {self.name}: only a correction (kind 'correction') has a correct")
+        if self.time_base and self.correct is None:
+            raise HelmetAncError(f"effect {self.name}: time_base belongs to a data correction (one with a correct)")
         if self.build is not None and self.refine_params is None:
             raise HelmetAncError(f"effect {self.name}: a structure needs its refine_params (may be empty)")
 

@@ -35,5 +35,5 @@ CLOCK_DRIFT = register(Effect(
     name="clock-drift", summary="ear clock against input clock, parts per million (positive: ear fast)",
     simulate_params=(ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
     refine_params=(ParameterSpec("ppm", None, -5000.0, 5000.0),),
-    detect=clock_drift_finding, build=add_clock_drift, correct=with_clock_drift, complete=_complete, auto_params=lambda p: {"ppm": p["ppm"]},
+    detect=clock_drift_finding, build=add_clock_drift, correct=with_clock_drift, time_base=True, complete=_complete, auto_params=lambda p: {"ppm": p["ppm"]},
     kind="correction", figure="segments", random=_random))
