@@ -439,8 +439,10 @@ def _corrected_refit(trial: Model, noise, sweeps, options, transient_s) -> Model
     samples out of the cost (``_gap_aware``).
     """
     scored = [(compare(t, sweeps), t) for t in (trial, _warm(trial, noise, options, transient_s)) if t.stable]
-    best_after, best = min(scored, key=lambda pair: pair[0].rms)
-    if best_after.ratio <= WARM_ENOUGH:
+    # Neither stable (a warm start run unstable behind the corrections): only a fresh fit can help, and
+    # without one the unstable trial goes back for the caller to refuse.
+    best_after, best = min(scored, key=lambda pair: pair[0].rms) if scored else (None, trial)
+    if best_after is not None and best_after.ratio <= WARM_ENOUGH:
         return best
     for _ in range(CLIPPING_PASSES if trial.excluded else 1):
         try:
@@ -449,11 +451,13 @@ def _corrected_refit(trial: Model, noise, sweeps, options, transient_s) -> Model
             # No stable model in the grid: the trial (or the last pass) still stands.
             break
         after = compare(refit, sweeps) if refit.stable else None
-        if after is None or after.rms >= (1.0 - RUN_TO_RUN_MIN) * best_after.rms:
+        if after is None or (best_after is not None and after.rms >= (1.0 - RUN_TO_RUN_MIN) * best_after.rms):
             break
         best, best_after = refit, after
         if after.ratio <= AT_FLOOR:
             break
+    if best_after is None:
+        return best
     if best_after.ratio > WARM_ENOUGH:
         # The latency read again on the corrected data may still read long (``_shorter_delays``).
         best, best_after = _shorter_delays(best, best_after, noise, sweeps, options, transient_s)

@@ -9,7 +9,9 @@ from sysid.latency import compensate_delay
 from sysid.model import Model
 from sysid.output_error import block_data, refine_output_error
 from sysid.random_plant import random_plant, random_session
-from sysid.refits import _shorter_delays, add_periodic_disturbance
+from sysid import refits
+from sysid.errors import IdentificationError
+from sysid.refits import _corrected_refit, _shorter_delays, add_periodic_disturbance
 from sysid import lti
 
 from effect_sessions import TEST_REFIT
@@ -61,3 +63,23 @@ def test_modelling_a_hum_unmasks_a_delay_read_long():
     assert params["frequencies_hz"] == [60.0, 120.0, 180.0]
     assert refined.delay < model.delay and abs(refined.delay - rp.delay) <= 2
     assert compare(refined, session.sweeps).ratio < 1.2
+
+
+def test_a_correction_whose_starts_are_all_unstable_returns_the_trial_for_the_caller_to_refuse(monkeypatch):
+    # The trial (corrections applied, core kept) and its warm start both unstable, and no stable model in the
+    # fresh fit's grid: the unstable trial comes back (refine's _refinement refuses it in one line), not a
+    # ValueError from choosing among no candidates.
+    session = random_session(3, noise_duration=4.0, sweep_duration=1.0, sweep_silence=0.2)
+    trial = Model(path="fb", fs=session.noise.fs, A=np.array([[1.01]]), B=np.array([[1.0]]), C=np.array([[0.1]]),
+                  D=np.zeros((1, 1)), delay=3)
+    fresh_calls = []
+
+    def no_stable_model(*args):
+        fresh_calls.append(args)
+        raise IdentificationError("no stable model in the grid")
+
+    monkeypatch.setattr(refits, "_warm", lambda t, *args: t)
+    monkeypatch.setattr(refits, "_fresh", no_stable_model)
+    result = _corrected_refit(trial, session.noise, session.sweeps, TEST_REFIT, TRANSIENT_S)
+    assert result is trial and not result.stable
+    assert len(fresh_calls) == 1
