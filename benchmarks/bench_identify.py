@@ -115,8 +115,23 @@ def bench_random(seed: int, noise_seconds: float, sweep_seconds: float, full_onl
         model = result.model
         out[label] = {"rms": model.identification["rms"] / true_floor,
                       "frf": float(np.max(np.abs(model.frequency_response(f) - h_true)) / np.max(np.abs(h_true))),
-                      "order": model.order, "delay": model.delay, "wall": wall, "cpu": cpu}
+                      "order": model.order, "delay": model.delay, "wall": wall, "cpu": cpu,
+                      **_band_figures(model, rp.model)}
     return out
+
+
+def _band_figures(model, truth) -> dict:
+    """The model's 95 % band (``model.uncertainty``) against the true plant over 20 Hz-4 kHz: the share of its
+    frequencies where |H_model - H_true| <= relative_95 |H_model| (coverage) and the median relative_95 (width);
+    empty when the model has no band (the seed grid's choice)."""
+    if not model.uncertainty:
+        return {}
+    f = np.asarray(model.uncertainty["frequencies_hz"])
+    relative = np.asarray(model.uncertainty["relative_95"])
+    inside = (f >= 20.0) & (f <= 4000.0)
+    h_model = model.frequency_response(f[inside])
+    covered = np.abs(h_model - truth.frequency_response(f[inside])) <= relative[inside] * np.abs(h_model)
+    return {"coverage": float(covered.mean()), "width": float(np.median(relative[inside]))}
 
 
 def _why(r: dict, label: str) -> str:
@@ -146,7 +161,8 @@ def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: i
         r = rows[-1]
         print(f"<!-- seed {seed}: true n {r['order']} d {r['delay']}; " + "; ".join(
             f"{k} rms {r[k]['rms']:.2f}x frf {r[k]['frf']:.3f} n {r[k]['order']} d {r[k]['delay']} {r[k]['wall']:.1f} s "
-            f"CPU {r[k]['cpu']:.1f} s" for k, _ in labels) + " -->", flush=True)
+            f"CPU {r[k]['cpu']:.1f} s" + (f" band {r[k]['coverage']:.2f} width {r[k]['width']:.4f}" if "coverage" in r[k] else "")
+            for k, _ in labels) + " -->", flush=True)
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     selection = f"--seeds {','.join(map(str, seeds))}" if seeds != list(range(first, first + count)) else f"--random {count} --first {first}"
     print(f"\nMachine: {_cpu_model()}, {__import__('os').cpu_count()} cores, date {time.strftime('%Y-%m-%d')}. "
@@ -169,6 +185,14 @@ def main_random(count: int, noise_seconds: float, sweep_seconds: float, first: i
               f"{np.median(frf):.3f} / {frf.max():.3f} | "
               f"{np.median(dn):+.0f} ({dn.min():+d}..{dn.max():+d}) | {dd.min():+d}..{dd.max():+d} | "
               f"{np.median(wall):.1f} / {wall.max():.1f} | {np.median(cpu):.1f} / {cpu.max():.1f} |")
+    banded = [r["full"] for r in rows if "coverage" in r["full"]]
+    if banded:
+        coverage = np.array([b["coverage"] for b in banded])
+        width = np.array([b["width"] for b in banded])
+        print(f"\nFull pipeline's 95 % band (20 Hz-4 kHz, against the true plant): coverage >= 90 % on "
+              f"{int(np.sum(coverage >= 0.9))}/{len(banded)} models, coverage median {np.median(coverage):.3f}, lowest "
+              f"{coverage.min():.3f}; median width (relative_95) median {100 * np.median(width):.3f} %, largest "
+              f"{100 * width.max():.3f} %.")
     failing = [r for r in rows if _why(r, "full")]
     if failing:
         print("\nFull pipeline failing: " + "; ".join(
