@@ -549,7 +549,15 @@ class _Projection:
         self._residual = rhs - real @ scaled
 
     def residual(self, x):
-        """The residual at x (a copy: MINPACK may write into the array it is given)."""
+        """The residual at x (a copy: MINPACK may write into the array it is given).
+
+        A trial point that is not finite (MINPACK's step computation broke down in its own arithmetic:
+        random helmet 100 FB with a time-varying plant, an order-14 fit of the order search proposed all-NaN
+        parameters from a finite residual and Jacobian) gets a residual far above the last one, which MINPACK
+        rejects: it keeps its last accepted point and stops at its evaluation limit, instead of handing the
+        least squares a NaN regressor."""
+        if not np.all(np.isfinite(x)):
+            return np.full_like(self._residual, 1e6 * max(float(np.max(np.abs(self._residual))), 1.0))
         self._solve(x)
         return self._residual.copy()
 

@@ -259,3 +259,18 @@ def test_minpack_takes_the_iterates_of_least_squares_lm(rng):
     assert fit.cost_after == pytest.approx(float(np.sum(reference.fun**2)), rel=1e-12)
     np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(fit.A)),
                                np.sort_complex(output_error._params_to_poles(reference.x, pairs, margin)), rtol=1e-10)
+
+
+def test_a_trial_point_that_is_not_finite_gets_a_residual_the_optimiser_rejects(rng):
+    # MINPACK's step computation can break down and propose NaN parameters from a finite residual and
+    # Jacobian: the residual there is finite and far above the last one, and the last point's state stands.
+    data = block_data(_noise_recording(appendix_a_model("ff"), rng, seconds=0.5, output_noise=1e-3), max_seconds=None)
+    poles = np.concatenate([0.99 * np.exp(1j * np.array([0.01, 0.6])), 0.99 * np.exp(-1j * np.array([0.01, 0.6])), [0.5]])
+    x, pairs = output_error._poles_to_params(poles, output_error.decay_bound(data))
+    projection = output_error._Projection(output_error._Problem(data, 0, False), pairs)
+    before = projection.residual(x)
+    broken = projection.residual(np.full_like(x, np.nan))
+    assert np.all(np.isfinite(broken)) and np.linalg.norm(broken) > 1e3 * np.linalg.norm(before)
+    np.testing.assert_array_equal(projection.residual(x), before)
+    A, C, theta, residual = projection.linear(x)
+    assert np.all(np.isfinite(theta)) and np.all(np.isfinite(residual))
