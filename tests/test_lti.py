@@ -115,19 +115,25 @@ def _cluster(newton: np.ndarray):
     return np.diag(p), np.array(r)[:, None], np.ones((1, 4)), exact
 
 
+def _assert_balanced_holding(system, order: int, exact: np.ndarray) -> None:
+    """``system`` (A, B, C, D) has ``order`` states, entries of order one, equal diagonal Gramians and the
+    frequency response ``exact`` on Z within 1e-7 of its peak."""
+    A, B, C, D = system
+    assert A.shape == (order, order)
+    assert max(np.abs(A).max(), np.abs(B).max(), np.abs(C).max()) < 1.0 + 1e-9
+    assert np.max(np.abs(lti.frequency_response(A, B, C, D, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
+    wc, wo = lti.gramians(A, B, C)
+    np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
+    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
+
+
 def test_clustered_real_poles_with_cancelling_residues_balance_to_entries_of_order_one():
     # The Gramians of the modal form lose their small eigenvalues (the square-root method's result
     # misses the response: balanced_realisation only equalises); its chain realisation balances.
     A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 1e-4]))
     assert np.abs(B).max() > 1e6
     assert np.abs(lti.balanced_realisation(A, B, C, 0.0)[1]).max() > 10.0
-    Ab, Bb, Cb, Db = lti.balanced_truncation(A, B, C, 0.0)
-    assert Ab.shape == (4, 4)
-    assert max(np.abs(Ab).max(), np.abs(Bb).max(), np.abs(Cb).max()) < 1.0 + 1e-9
-    assert np.max(np.abs(lti.frequency_response(Ab, Bb, Cb, Db, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
-    wc, wo = lti.gramians(Ab, Bb, Cb)
-    np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
-    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
+    _assert_balanced_holding(lti.balanced_truncation(A, B, C, 0.0), 4, exact)
 
 
 def test_a_nearly_real_pair_among_close_real_poles_balances_to_a_real_system():
@@ -162,14 +168,8 @@ def test_a_state_that_carries_nothing_is_left_out_by_balanced_truncation():
     A, B, C, exact = _cluster(np.array([1e-1, 1e-2, 1e-3, 0.0]))
     Ab, Bb, Cb, _ = lti.balanced_realisation(A, B, C, 0.0)
     assert max(np.abs(Bb).max(), np.abs(Cb).max()) > 10.0
-    At, Bt, Ct, Dt = lti.balanced_truncation(A, B, C, 0.0)
-    assert At.shape == (3, 3)
-    assert max(np.abs(At).max(), np.abs(Bt).max(), np.abs(Ct).max()) < 1.0 + 1e-9
-    assert np.max(np.abs(lti.frequency_response(At, Bt, Ct, Dt, Z) - exact)) < 1e-7 * np.max(np.abs(exact))
     # Balanced at its own order (a discrete-time truncation alone is not).
-    wc, wo = lti.gramians(At, Bt, Ct)
-    np.testing.assert_allclose(wc, wo, atol=1e-9 * wc[0, 0])
-    assert np.max(np.abs(wc - np.diag(np.diag(wc)))) < 1e-9 * wc[0, 0]
+    _assert_balanced_holding(lti.balanced_truncation(A, B, C, 0.0), 3, exact)
     # Nothing negligible: the full order, as balanced_realisation gives it (up to the states' signs).
     plant = random_plant(0).model
     full = lti.balanced_truncation(plant.A, plant.B, plant.C, plant.D)
