@@ -97,6 +97,7 @@ import numpy as np
 
 from . import lti
 from .lines import find_lines, fit_sinusoids
+from .order_search import distinct_start
 from .output_error import block_data, linear_cost, radius_bound_mask, refine_output_error
 from .recordings import Recording
 from .spectra import Spectra
@@ -239,8 +240,6 @@ def _causal_start(A, data, feedthrough: bool) -> np.ndarray:
     the longer delay put them: refitted from them for 10 iterations the cost at the true delay was 2.7 times the
     one at 11; from the same poles with the bound one replaced, 0.56 times (and 1.0 at 9).
     """
-    from .order_search import distinct_start  # order_search is built on output_error like this module
-
     A = np.asarray(A, dtype=float)
     poles = np.linalg.eigvals(A)
     if not radius_bound_mask(poles, data).any():

@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 
 from . import lti
-from .output_error import BlockData, radius_bound_mask, refine_output_error
+from .output_error import BlockData, at_radius_bound, radius_bound_mask, refine_output_error
 
 __all__ = ["Reduced", "is_balanced", "truncation_orders", "without_degenerate_states"]
 
@@ -77,15 +77,22 @@ class Reduced:
 def is_balanced(A, B, C) -> bool:
     """Whether both Gramians of the stable (A, B, C) equal one diagonal matrix within
     _BALANCED_TOLERANCE of the largest Hankel singular value (``lti.balanced_realisation``'s result)."""
+    return _balanced_hankel_values(A, B, C) is not None
+
+
+def _balanced_hankel_values(A, B, C) -> np.ndarray | None:
+    """The Hankel singular values of a balanced stable (A, B, C) (the diagonal its two Gramians share),
+    in its states' order; None when it is not balanced (``is_balanced``)."""
     if np.asarray(A).shape[0] == 0:
-        return True
+        return np.zeros(0)
     try:
         wc, wo = lti.gramians(A, B, C)
     except (np.linalg.LinAlgError, ValueError):
-        return False
+        return None
     scale = max(np.max(np.abs(np.diag(wc))), 1e-300)
     off = np.max(np.abs(wc - np.diag(np.diag(wc)))) + np.max(np.abs(wc - wo))
-    return bool(np.all(np.isfinite(wc)) and np.all(np.isfinite(wo)) and off <= _BALANCED_TOLERANCE * scale)
+    balanced = np.all(np.isfinite(wc)) and np.all(np.isfinite(wo)) and off <= _BALANCED_TOLERANCE * scale
+    return np.diag(wc) if balanced else None
 
 
 def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate: Callable[[Reduced], float],
@@ -98,7 +105,7 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
     """
     current = Reduced(np.asarray(A, float), np.asarray(B, float), np.asarray(C, float), np.asarray(D, float), rms)
     poles = np.linalg.eigvals(current.A)
-    bound = radius_bound_mask(poles, block) if poles.size else np.zeros(0, bool)
+    bound = radius_bound_mask(poles, block)
     if np.any(bound) and np.count_nonzero(~bound) > 0:
         kept = poles[~bound]
         n = kept.size
@@ -107,18 +114,20 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
                                   noise_tolerance=True)
         refit = Reduced(fit.A, fit.B, fit.C, fit.D, np.inf,
                         f"{np.count_nonzero(bound)} poles at the radius bound dropped, the rest refitted")
-        if not np.any(radius_bound_mask(np.linalg.eigvals(fit.A), block)):
+        if not at_radius_bound(np.linalg.eigvals(fit.A), block):
             refit.rms = validate(refit)
             if refit.rms <= rms * (1 + min_gain):
                 current = refit
-    if not is_balanced(current.A, current.B, current.C):
+    hsv = _balanced_hankel_values(current.A, current.B, current.C)
+    if hsv is None:
         truncated = lti.balanced_truncation(current.A, current.B, current.C, current.D, tol=_NEGLIGIBLE_HSV)
         if truncated is not None:
             removed = current.A.shape[0] - truncated[0].shape[0]
             note = (f"{removed} state{'s' if removed > 1 else ''} of negligible Hankel singular value left out" if removed
                     else "balanced")
             current = Reduced(*truncated, current.rms, "; ".join(filter(None, [current.removed, note])))
-    truncated = _truncated(current, validate)
+            hsv = _balanced_hankel_values(current.A, current.B, current.C)
+    truncated = _truncated(current, hsv, validate)
     if truncated is current:
         return current
     # A truncated model is not the least-squares fit of its order: its error, below the validation's noise,
@@ -127,7 +136,7 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
     fit = refine_output_error(truncated.A, truncated.B, truncated.C, truncated.D, block, feedthrough=feedthrough,
                               max_iterations=_POLISH_ITERATIONS, noise_tolerance=True)
     polished = Reduced(fit.A, fit.B, fit.C, fit.D, np.inf, truncated.removed + ", refined")
-    if not np.any(radius_bound_mask(np.linalg.eigvals(fit.A), block)):
+    if not at_radius_bound(np.linalg.eigvals(fit.A), block):
         polished.rms = validate(polished)
         if polished.rms <= truncated.rms * (1 + _TRUNCATION_GAIN):
             return polished
@@ -144,12 +153,12 @@ def truncation_orders(hsv: np.ndarray) -> list[int]:
     return sorted(k for k in orders if 0 < k < hsv.size)
 
 
-def _truncated(current: Reduced, validate: Callable[[Reduced], float]) -> Reduced:
-    """``current`` (balanced) truncated to the lowest of its ``truncation_orders`` whose validation rms
-    is within _TRUNCATION_GAIN of its own; as it is when none is."""
-    if current.A.shape[0] < 2 or not is_balanced(current.A, current.B, current.C):
+def _truncated(current: Reduced, hsv: np.ndarray | None, validate: Callable[[Reduced], float]) -> Reduced:
+    """``current`` truncated to the lowest of its ``truncation_orders`` whose validation rms is within
+    _TRUNCATION_GAIN of its own; as it is when none is, or when it is not balanced (``hsv``, its Hankel
+    singular values from ``_balanced_hankel_values``, None)."""
+    if current.A.shape[0] < 2 or hsv is None:
         return current
-    hsv = np.diag(lti.gramians(current.A, current.B, current.C)[0])
     for order in truncation_orders(np.sort(hsv)[::-1]):
         truncated = lti.balanced_truncation(current.A, current.B, current.C, current.D, order=order)
         if truncated is None:
