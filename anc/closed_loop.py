@@ -16,7 +16,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from sysid.model import Model
+from sysid.core.model import Model
 
 from .controller import Controller, StateSpaceFilter
 from .prediction import BANDS

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sysid.errors import HelmetAncError
-from sysid.files import atomic_write_text
-from sysid.model import Model
-from sysid import lti
+from sysid.core import lti
+from sysid.core.errors import HelmetAncError
+from sysid.core.files import atomic_write_text
+from sysid.core.model import Model
 
 __all__ = ["CONTROLLER_FORMAT", "StateSpaceFilter", "Controller"]
 

@@ -36,9 +36,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from codegen.realise import balanced_realisation
-from sysid.errors import HelmetAncError
-from sysid.model import Model
-from sysid.structures import series, tf_to_statespace
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
+from sysid.core.structures import series, tf_to_statespace
 
 from .basis import LaguerreBasis
 from .controller import Controller, StateSpaceFilter

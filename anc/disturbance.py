@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from sysid.errors import HelmetAncError
-from sysid.model import Model
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
 
 from .uncertainty import stated_band
 
@@ -128,7 +128,7 @@ def default_disturbance(fs: float, ff_model: Model | None = None, coherence: flo
 def from_recording(recording, fs_expected: float | None = None, segment_s: float = 0.1) -> Disturbance:
     """Welch spectra of a recording with ANC off: input channel = chin microphone, output = ear.
 
-    ``recording`` is a ``sysid.recordings.Recording`` (fields u = chin, y = ear, fs, path).
+    ``recording`` is a ``sysid.io.recordings.Recording`` (fields u = chin, y = ear, fs, path).
     Hann segments of ``segment_s`` seconds, half overlap. The cross spectrum is E[D X*]
     (scipy's ``csd(x, y)`` returns E[X* Y], i.e. E[Y X*] with y = ear).
     """

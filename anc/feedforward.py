@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sysid.model import Model
+from sysid.core.model import Model
 
 from .basis import LaguerreBasis, fit
 from .disturbance import Disturbance

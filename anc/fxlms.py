@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid.model import Model
+from sysid.core.model import Model
 
 __all__ = ["FxlmsRun", "run_fxlms", "convergence"]
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sysid.compare import third_octave_bands
+from sysid.validation.compare import third_octave_bands
 
 from .disturbance import Disturbance
 

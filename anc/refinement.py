@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid.errors import HelmetAncError
-from sysid.model import Model
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
 
 from .controller import Controller
 from .design import DesignOptions, design

@@ -38,9 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid.errors import HelmetAncError
-from sysid.thresholds import IDENTIFICATION_BAND
-from sysid.model import Model
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
+from sysid.core.thresholds import IDENTIFICATION_BAND
 
 __all__ = ["Uncertainty", "model_uncertainty", "stated_band", "DEFAULT_IN_BAND", "OUTSIDE_BAND", "LINEARISATION_LIMIT",
            "MAX_VALIDATION_RATIO"]
@@ -130,7 +130,7 @@ def _stated_field(model: Model) -> dict | None:
 
 def stated_band(model: Model) -> tuple[float, float]:
     """(lowest, highest) frequency in Hz the model is vouched for: its uncertainty field's range, else
-    its identification band, else ``sysid.thresholds.IDENTIFICATION_BAND`` (``model_uncertainty``'s band)."""
+    its identification band, else ``sysid.core.thresholds.IDENTIFICATION_BAND`` (``model_uncertainty``'s band)."""
     stated = _stated_field(model)
     if stated:
         f = np.asarray(stated["frequencies_hz"], dtype=float)

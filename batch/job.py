@@ -14,8 +14,8 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 
+from sysid.core.model import Model
 from sysid.identify import IdentificationOptions
-from sysid.model import Model
 
 from .manifest import SessionEntry, read_sessions, safe_name
 from .nominal import NominalModel, nominal_model

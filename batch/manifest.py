@@ -20,8 +20,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from sysid.errors import HelmetAncError
-from sysid.model import PATHS
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import PATHS
 
 __all__ = ["SessionEntry", "read_sessions", "safe_name", "SESSION_FILES", "MANIFEST_COLUMNS"]
 

@@ -12,7 +12,7 @@ uncertainty), i.e.
    H_0 = exp(mean_i (ln|H_i| + j arg H_i)) with each phase unwrapped along frequency:
    a geometric mean of the magnitudes and a mean phase, which does not cancel when
    members' phases differ (an arithmetic mean of the complex responses would).
-2. Low-order model of H_0: the frequency-domain subspace method (``sysid.subspace``,
+2. Low-order model of H_0: the frequency-domain subspace method (``sysid.estimation.subspace``,
    McKelvey, Akcay & Ljung 1996) on H_0 z^d (d the members' smallest delay), weighted
    by 1/|H_0| so the fit is relative, for each order up to a few above the members';
    every member's own model is a candidate too. The lowest order whose mean bound is
@@ -31,10 +31,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sysid.errors import HelmetAncError
-from sysid.thresholds import IDENTIFICATION_BAND
-from sysid.model import Model
-from sysid.subspace import SubspaceDecomposition
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
+from sysid.core.thresholds import IDENTIFICATION_BAND
+from sysid.estimation.subspace import SubspaceDecomposition
 
 __all__ = ["NominalModel", "nominal_model", "member_band", "BOUND_POINTS", "ORDER_TOLERANCE"]
 

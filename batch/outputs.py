@@ -27,8 +27,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-
-from sysid.files import PARTIAL, OutputRefused, atomic_write_text, is_ours, sha256_text
+from sysid.core.files import PARTIAL, OutputRefused, atomic_write_text, is_ours, sha256_text
 
 __all__ = ["BATCH_FORMAT", "RESULT_FORMAT", "TABLE_FORMAT", "TABLE_CSV_START", "OutputLayout", "prepare_outdir",
            "foreign_entries", "write_json", "read_json", "atomic_write_text"]
@@ -108,7 +107,7 @@ def prepare_outdir(outdir, inputs, force: bool = False) -> OutputLayout:
 
 
 def _interrupted_write(path: Path) -> bool:
-    # sysid.files.atomic_write's temporary file, left when a process was killed mid-write.
+    # sysid.core.files.atomic_write's temporary file, left when a process was killed mid-write.
     return path.is_file() and path.name.startswith(".") and path.name.endswith(PARTIAL)
 
 

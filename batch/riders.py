@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid import lti
-from sysid.errors import HelmetAncError
-from sysid.model import Model
-from sysid.subspace import fit_b_d
+from sysid.core import lti
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
+from sysid.estimation.subspace import fit_b_d
 
 __all__ = ["RiderSpread", "rider_variant"]
 

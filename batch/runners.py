@@ -96,13 +96,14 @@ def run_dask(tasks: list[SessionTask], scheduler=None, retries: int = DEFAULT_RE
     faults (BENCHMARKS.md, Batch); set ``MALLOC_TRIM_THRESHOLD_`` and
     ``MALLOC_MMAP_THRESHOLD_`` to 33554432 in the workers' environment instead.
     """
-    from dask.distributed import Client, as_completed as dask_completed
+    from dask.distributed import Client
+    from dask.distributed import as_completed as dask_completed
 
     own_client = not isinstance(scheduler, Client)
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT_S) if own_client else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
-        from sysid.errors import HelmetAncError
+        from sysid.core.errors import HelmetAncError
 
         raise HelmetAncError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     try:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sysid.model import Model
+from sysid.core.model import Model
 from sysid.random_plant import random_plant
 from sysid.simulate import SessionSpec, simulate_session, write_session
 

@@ -11,8 +11,8 @@ from html import escape
 
 import numpy as np
 
-from sysid.report.html import figure_png
-from sysid.report.style import COLORS, db, log_frequency_axis, new_figure
+from report.html import figure_png
+from report.style import COLORS, db, log_frequency_axis, new_figure
 
 from .nominal import NominalModel
 from .outputs import OutputLayout, atomic_write_text
@@ -86,7 +86,7 @@ def render_summary(rows: list[dict], nominals: dict, dpi: float = 80.0) -> str:
     body = [_group_html(key, group, nominals.get(key), dpi) for key, group in sorted(groups.items())]
     title = "helmet-anc batch summary"
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            # The generator tag is how a later batch (sysid.files.is_ours) knows the page is ours.
+            # The generator tag is how a later batch (sysid.core.files.is_ours) knows the page is ours.
             f'<meta name="generator" content="helmet-anc batch"><title>{title}</title>'
             f"<style>{_CSS}</style></head><body>\n<h1>{title}</h1>\n"
             f"<p>{len(rows)} session(s), {len(rows) - failed} identified, {failed} failed, "

@@ -24,9 +24,10 @@ from dataclasses import dataclass
 
 from threadpoolctl import threadpool_limits
 
-from sysid.files import sha256_text
+from sysid.core.files import sha256_text
 from sysid.identify import IdentificationOptions, identify
-from sysid.recordings import RecordingWarning, load_recording
+from sysid.io.recordings import RecordingWarning, load_recording
+
 from .manifest import SessionEntry
 from .outputs import RESULT_FORMAT, OutputLayout, read_json, write_json
 

@@ -42,19 +42,13 @@ from codegen.api import generate_firmware
 from codegen.build import build_host
 from codegen.cmsis import KERNEL_FUNCTIONS, design_cmsis, q31_kernel, q31x64_kernel
 from codegen.plan import plan_firmware
-from codegen.qemu_cost import (
-    M4_CFLAGS,
-    build_m4_elf,
-    count_regions,
-    have_m4_tools,
-    per_sample_cost,
-    per_sample_function_cost,
-)
+from codegen.qemu_cost import (M4_CFLAGS, build_m4_elf, count_regions, have_m4_tools, per_sample_cost,
+                               per_sample_function_cost)
 from codegen.reference import float64_reference, from_q15, to_q15
 from codegen.sections import Cascade, Section
 from codegen.targets import get_target
 from codegen.verify import snr_db
-from sysid.plants import appendix_a_model
+from sysid.core.plants import appendix_a_model
 
 SECTION_TITLE = "## Firmware generation (issue 5)"
 HERE = Path(__file__).resolve().parent
@@ -98,7 +92,7 @@ def naive_tables(model):
     zpk2sos pads the missing zeros at the origin, which advances the output by
     r = (poles - zeros) samples; the returned r lets the comparison undo that.
     """
-    from sysid import lti
+    from sysid.core import lti
 
     zeros, poles = model.zeros(), model.poles()
     sos = scipy.signal.zpk2sos(zeros, poles, 1.0)

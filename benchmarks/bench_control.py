@@ -24,14 +24,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
+from conftest import FAST_OPTIONS, SHORT  # noqa: E402
+
 from anc import design  # noqa: E402
 from anc.closed_loop import verify  # noqa: E402
 from anc.disturbance import default_disturbance, synthesize  # noqa: E402
 from anc.fxlms import convergence, run_fxlms  # noqa: E402
 from anc.prediction import band_centres  # noqa: E402
 from anc.uncertainty import model_uncertainty  # noqa: E402
-from conftest import FAST_OPTIONS, SHORT  # noqa: E402
-from sysid.errors import HelmetAncError  # noqa: E402
+from sysid.core.errors import HelmetAncError  # noqa: E402
 from sysid.identify import identify  # noqa: E402
 from sysid.random_plant import random_plant, random_session  # noqa: E402
 from sysid.simulate import SessionSpec, simulate_session  # noqa: E402

@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
+from sysid.core.errors import HelmetAncError
 from sysid.diagnose import diagnose
-from sysid.errors import HelmetAncError
 from sysid.identify import IdentificationOptions, identify
 from sysid.random_plant import random_session
 from sysid.refine import refine_auto

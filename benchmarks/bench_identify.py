@@ -25,13 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sysid.grid import grid_search
+from sysid.estimation.grid import grid_search
+from sysid.estimation.spectra import estimate_spectra
 from sysid.identify import IdentificationOptions, identify
+from sysid.io.recordings import load_recording
 from sysid.random_plant import random_plant, random_session
-from sysid.recordings import load_recording
 from sysid.simulate import SessionSpec, simulate_session, write_session
-from sysid.spectra import estimate_spectra
-from sysid.validation import noise_floor, simulated_rms, sweep_spectrum
+from sysid.validation.sweeps import noise_floor, simulated_rms, sweep_spectrum
 
 BAND = np.linspace(20.0, 1500.0, 600)
 

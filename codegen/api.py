@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sysid.files import OutputRefused, check_output_directory
-from sysid.model import Model
+from sysid.core.files import OutputRefused, check_output_directory
+from sysid.core.model import Model
 
 from . import __version__, noise
 from .errors import CodegenError, OutputError
@@ -70,8 +70,8 @@ def _json_ready(value):
 def load_sweeps(sweeps, fs: float | None = None) -> tuple[list[np.ndarray], list[str]]:
     """Sweep inputs (full-scale float64) and labels from WAV paths, recordings or arrays.
 
-    A path is read with :func:`sysid.recordings.load_recording`; of a recording
-    (a path's or a :class:`sysid.recordings.Recording` given directly) the input
+    A path is read with :func:`sysid.io.recordings.load_recording`; of a recording
+    (a path's or a :class:`sysid.io.recordings.Recording` given directly) the input
     channel ``u`` is what the filter sees on the board. With ``fs`` given, a
     recording at another sample rate is an error (the filter runs at ``fs``;
     nothing is resampled).
@@ -79,7 +79,7 @@ def load_sweeps(sweeps, fs: float | None = None) -> tuple[list[np.ndarray], list
     signals, labels = [], []
     for index, sweep in enumerate(sweeps or []):
         if isinstance(sweep, (str, os.PathLike)):
-            from sysid.recordings import RecordingWarning, load_recording
+            from sysid.io.recordings import RecordingWarning, load_recording
 
             with warnings.catch_warnings():
                 # Quality warnings concern the ear channel, which the filter never sees.
@@ -139,7 +139,7 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
                       quantiser: str = "efb", force: bool = False, progress=None) -> Manifest:
     """Generate (and with ``sweeps``, verify) the C filter of a model into ``outdir``.
 
-    ``model`` is a :class:`sysid.model.Model` or a path to its JSON file; ``name``
+    ``model`` is a :class:`sysid.core.model.Model` or a path to its JSON file; ``name``
     defaults to the model's path ('fb' or 'ff'); ``fs`` is the board rate in Hz
     (None: the model's rate); ``sweeps`` are WAV paths or full-scale arrays whose
     every sample is run through the host build. Raises a CodegenError subclass

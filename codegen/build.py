@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sysid.files import staged_directory
+from sysid.core.files import staged_directory
 
 from .errors import BuildError
 
@@ -116,7 +116,7 @@ def build_host(name: str, header: str, source: str) -> HostFilter:
     final = root / key
     if not any(final.glob(f"{module_name}*.so")) and not any(final.glob(f"{module_name}*.pyd")):
         try:
-            # Built in a staging folder renamed into the cache (sysid.files.staged_directory): an
+            # Built in a staging folder renamed into the cache (sysid.core.files.staged_directory): an
             # interrupted or failed build leaves nothing; a concurrent identical build wins harmlessly.
             with staged_directory(final) as scratch:
                 (scratch / f"{name}_filter.h").write_text(header, encoding="utf-8")

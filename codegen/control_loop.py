@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sysid.model import Model
+from sysid.core.model import Model
 
 from .fixedpoint import FixedDesign
 from .float32 import FloatDesign

@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.signal
 
-from sysid.files import OutputRefused, check_output_directory
-from sysid.model import Model
+from sysid.core.files import OutputRefused, check_output_directory
+from sysid.core.model import Model
 
 from . import __version__
 from .errors import CodegenError, OutputError

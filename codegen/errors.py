@@ -1,10 +1,10 @@
 """Exceptions raised by firmware generation.
 
-All subclass :class:`sysid.errors.HelmetAncError` (a ``ValueError``), so the
+All subclass :class:`sysid.core.errors.HelmetAncError` (a ``ValueError``), so the
 command-line front ends turn them into a one-line message and exit status 2.
 """
 
-from sysid.errors import HelmetAncError
+from sysid.core.errors import HelmetAncError
 
 __all__ = [
     "BuildError",

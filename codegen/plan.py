@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 
-from sysid.model import Model
+from sysid.core.model import Model
 
 from .cmsis import CmsisTables
 from .errors import CodegenError, PrecisionError

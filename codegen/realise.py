@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from sysid.lti import gramians, hankel_singular_values
-from sysid.model import Model
+from sysid.core.lti import gramians, hankel_singular_values
+from sysid.core.model import Model
 
 from .errors import CodegenError, UnstableModelError
 

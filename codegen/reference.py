@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sysid import lti
+from sysid.core import lti
 
 from .fixedpoint import FixedDesign, FixedSection
 from .float32 import FloatDesign

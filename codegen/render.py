@@ -17,7 +17,7 @@ from pathlib import Path
 import jinja2
 import numpy as np
 
-from sysid.files import OutputRefused, write_output_directory
+from sysid.core.files import OutputRefused, write_output_directory
 
 from . import __version__
 from .errors import InvalidNameError, OutputError
@@ -285,7 +285,7 @@ def render_files(context: dict, target: str = "generic") -> dict[str, str]:
 def write_directory(outdir: str | os.PathLike, files: dict[str, str | bytes], force: bool = False) -> Path:
     """Write ``files`` (``manifest.json`` among them) as the generated-code folder ``outdir``.
 
-    The rules are those of every helmet-anc output folder (:mod:`sysid.files`): a
+    The rules are those of every helmet-anc output folder (:mod:`sysid.core.files`): a
     new folder appears complete or not at all; an existing one is written only when
     it holds nothing but a previous output our manifest proves, or with ``force``,
     and only files a manifest of ours lists are ever removed.

@@ -1,7 +1,7 @@
 """Scaling of a realisation's second-order sections for the fixed- and floating-point filters.
 
 The sections themselves (pairing, ordering, relative degree) come from
-``sysid.sections``. Scaling makes the peak gain from the cascade input to the output
+``sysid.core.sections``. Scaling makes the peak gain from the cascade input to the output
 of each section but the last equal to the headroom (L-infinity norm by default, or
 the L1 norm of the impulse response, which rules out overflow for any input).
 """
@@ -13,9 +13,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.signal
 
-from sysid import lti
-from sysid.errors import ModelError
-from sysid.sections import Section, cascade_response, pair_sections, peak_grid, unit_section
+from sysid.core import lti
+from sysid.core.errors import ModelError
+from sysid.core.sections import Section, cascade_response, pair_sections, peak_grid, unit_section
 
 from .errors import CodegenError
 from .realise import Realisation

@@ -34,13 +34,7 @@ from typing import Callable
 import numpy as np
 
 from . import noise
-from .cmsis import (
-    KERNEL_FUNCTIONS,
-    KERNELS,
-    cmsis_q15_reference,
-    design_cmsis,
-    df2t_f32_reference,
-)
+from .cmsis import KERNEL_FUNCTIONS, KERNELS, cmsis_q15_reference, design_cmsis, df2t_f32_reference
 from .errors import CodegenError, PrecisionError
 from .fixedpoint import design_fixed
 from .float32 import design_float32

@@ -22,14 +22,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from sysid.compare import compare
+from report.figures import error_bands_figure, finding_figure, model_bode_figure
+from sysid.core.plants import appendix_a_model
 from sysid.diagnose import diagnose
+from sysid.estimation.spectra import estimate_spectra
 from sysid.findings import DiagnosisContext
 from sysid.identify import IdentificationOptions, identify
-from sysid.plants import appendix_a_model
-from sysid.report.figures import error_bands_figure, finding_figure, model_bode_figure
 from sysid.simulate import SessionSpec, simulate_session
-from sysid.spectra import estimate_spectra
+from sysid.validation.compare import compare
 
 __all__ = ["make_figures"]
 

@@ -13,10 +13,11 @@ import pkgutil
 import sys
 import warnings
 
+from sysid.core.errors import HelmetAncError
+from sysid.io.recordings import RecordingWarning
+
 from . import commands as command_package
 from .pipes import quiet_on_closed_stdout
-from sysid.errors import HelmetAncError
-from sysid.recordings import RecordingWarning
 
 __all__ = ["main", "build_parser"]
 

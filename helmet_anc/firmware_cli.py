@@ -14,7 +14,8 @@ from codegen import __version__
 from codegen.api import format_verification_table, generate_firmware
 from codegen.errors import CodegenError
 from codegen.plan import TARGETS, VARIANTS
-from sysid.grid import terminal_progress
+from sysid.estimation.grid import terminal_progress
+
 from .pipes import quiet_on_closed_stdout
 
 __all__ = ["build_parser", "main"]
@@ -99,7 +100,7 @@ def _generate(parser, run):
     try:
         manifest = run()
     except KeyboardInterrupt:
-        # Every file is written by rename (sysid.files): an interrupt leaves no partial output.
+        # Every file is written by rename (sysid.core.files): an interrupt leaves no partial output.
         print(f"{parser.prog}: interrupted; no partial output left", file=sys.stderr)
         return 130
     except (CodegenError, ValueError) as exc:

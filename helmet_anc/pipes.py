@@ -4,7 +4,7 @@ When the reader of a pipe exits early, the next write to standard output raises
 ``BrokenPipeError`` (Python ignores SIGPIPE). A command line then stops with exit
 status 141 (128 + SIGPIPE, what a shell reports for a process ended by a closed pipe),
 no traceback and nothing on stderr: the reader asked for no more. Files a command
-writes are complete before anything is printed about them (sysid.files), so stopping
+writes are complete before anything is printed about them (sysid.core.files), so stopping
 here loses nothing.
 """
 

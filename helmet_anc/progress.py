@@ -4,7 +4,7 @@
 second on stderr while the block runs, and erases it at the end. Nothing is drawn when
 stderr is not a terminal (pipes, files, CI logs) or with ``--quiet``, and nothing for
 blocks shorter than ``after_s``. For steps with a known count of parts the grid search
-has its own bar (``sysid.grid.terminal_progress``).
+has its own bar (``sysid.estimation.grid.terminal_progress``).
 """
 
 from __future__ import annotations

@@ -9,24 +9,34 @@ and small dataclasses, so a notebook needs no files::
     result.model.save("ff_model.json")
 """
 
-from .errors import HelmetAncError, IdentificationError, ModelError, RecordingError
-from .grid import GridResult, grid_search
-from .identify import Identification, IdentificationOptions, identify
-from .model import Model
-from .plants import appendix_a_model
-from .recordings import (Recording, RecordingFile, RecordingWarning, check_same_rate, load_recording, open_recording,
-                         recording_from_arrays)
-from .simulate import Session, SessionSpec, simulate_session, write_session
-from .spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
-from .subspace import SubspaceDecomposition, subspace_fit
-from .validation import noise_floor, simulated_rms
-from .uncertainty import UncertaintyBand, frequency_response_band
-from .compare import Comparison, compare, format_comparison
+from . import _moved
+from .core.errors import HelmetAncError, IdentificationError, ModelError, RecordingError
+from .core.model import Model
+from .core.plants import appendix_a_model
 from .diagnose import diagnose, format_findings
+from .estimation.grid import GridResult, grid_search
+from .estimation.spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
+from .estimation.subspace import SubspaceDecomposition, subspace_fit
+from .estimation.uncertainty import UncertaintyBand, frequency_response_band
+from .identify import Identification, IdentificationOptions, identify
+from .io.recordings import (Recording, RecordingFile, RecordingWarning, check_same_rate, load_recording, open_recording,
+                            recording_from_arrays)
 from .refine import Refinement, format_refinement, refine, refine_auto
-from . import report  # write_report and the figures; matplotlib loads on first use
+from .simulate import Session, SessionSpec, simulate_session, write_session
+from .validation.compare import Comparison, compare, format_comparison
+from .validation.sweeps import noise_floor, simulated_rms
 
 __version__ = "0.1.0"
+
+_moved.install()
+
+
+def __getattr__(name: str):
+    # ``report`` (the report is the top-level package ``report`` now), through the old path's shim.
+    if name == "report":
+        import importlib
+        return importlib.import_module("report")
+    raise AttributeError(f"module 'sysid' has no attribute {name!r}")
 
 __all__ = [
     "HelmetAncError", "IdentificationError", "ModelError", "RecordingError", "RecordingWarning",
@@ -36,5 +46,5 @@ __all__ = [
     "Session", "SessionSpec", "simulate_session", "write_session", "estimate_spectra", "parzen_lag_window",
     "response", "smooth_spectra", "smoothed_response", "SubspaceDecomposition", "subspace_fit",
     "noise_floor", "simulated_rms", "UncertaintyBand", "frequency_response_band", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
-    "Refinement", "refine", "refine_auto", "format_refinement", "report", "__version__",
+    "Refinement", "refine", "refine_auto", "format_refinement", "__version__",
 ]

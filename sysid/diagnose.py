@@ -1,7 +1,7 @@
 """Diagnose what a model misses: ranked findings, each naming a physical effect (design.md).
 
 ``diagnose(model, noise, sweeps)`` compares the model with the sweeps
-(``sysid.compare``) and runs the detector of every effect in the registry
+(``sysid.validation.compare``) and runs the detector of every effect in the registry
 (``sysid.effects``; the detectors live in ``sysid.findings``), each after the
 detectors of the effects it declares it needs, reading only the shared values it
 declares it uses (``sysid.findings.uses``: the noise recording's prediction, the
@@ -37,13 +37,13 @@ from collections.abc import Sequence
 from threadpoolctl import threadpool_limits
 
 from . import effects as registry
-from .compare import compare
-from .corrections import corrected
-from .errors import IdentificationError
+from .core.errors import IdentificationError
+from .core.model import Model
+from .core.thresholds import TRANSIENT_S
 from .findings import DiagnosisContext, Finding
-from .model import Model
-from .recordings import Recording, check_same_rate
-from .thresholds import TRANSIENT_S
+from .io.corrections import corrected
+from .io.recordings import Recording, check_same_rate
+from .validation.compare import compare
 
 __all__ = ["diagnose", "Diagnosis", "Finding", "format_findings", "DETECTORS"]
 

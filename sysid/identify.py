@@ -39,22 +39,22 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import lti
-from .errors import IdentificationError
-from .grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .latency import LatencyEstimate, compensate_delay, decide_delay, estimate_latency
-from .lines import undriven_lines, without_lines
-from .model import PATHS, Model
-from .order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
-from .output_error import at_radius_bound, block_data, refine_output_error
-from .recordings import Recording, RecordingFile, check_same_rate
-from .reduction import without_degenerate_states
-from .spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
-from .subspace import SubspaceDecomposition
-from .thresholds import IDENTIFICATION_BAND, TRANSIENT_S
-from .uncertainty import frequency_response_band
-from .validation import (VALIDATION_BAND, check_repeats, noise_floor, repeat_lag, simulated_rms, sweep_spectrum,
-                         without_repeat_lines)
+from .core import lti
+from .core.errors import IdentificationError
+from .core.model import PATHS, Model
+from .core.thresholds import IDENTIFICATION_BAND, TRANSIENT_S
+from .estimation.delay import LatencyEstimate, compensate_delay, decide_delay, estimate_latency
+from .estimation.grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
+from .estimation.order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
+from .estimation.output_error import at_radius_bound, block_data, refine_output_error
+from .estimation.reduction import without_degenerate_states
+from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
+from .estimation.subspace import SubspaceDecomposition
+from .estimation.uncertainty import frequency_response_band
+from .io.lines import undriven_lines, without_lines
+from .io.recordings import Recording, RecordingFile, check_same_rate
+from .validation.sweeps import (VALIDATION_BAND, check_repeats, noise_floor, repeat_lag, simulated_rms, sweep_spectrum,
+                                without_repeat_lines)
 
 __all__ = ["IdentificationOptions", "Identification", "identify"]
 
@@ -122,7 +122,7 @@ def identify(noise: Recording | RecordingFile, sweeps: list[Recording], path: st
              options: IdentificationOptions | None = None, progress=None) -> Identification:
     """Identify a stable model of ``path`` from a noise recording and two sweeps.
 
-    A noise recording opened with ``sysid.recordings.open_recording`` is read in blocks:
+    A noise recording opened with ``sysid.io.recordings.open_recording`` is read in blocks:
     memory stays bounded whatever its length (the sweeps are held in memory).
     """
     # The matrices are at most a few thousand by sixty: BLAS threads only add overhead,
@@ -221,7 +221,7 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
         "noise_floor": floor,
         "refined": result_model is not seed_model,
     })
-    # The 95 % band of the returned model (sysid.uncertainty), from the delay-compensated noise block it was refined on.
+    # The 95 % band of the returned model (sysid.estimation.uncertainty), from the delay-compensated noise block it was refined on.
     t0 = time.perf_counter()
     core = Model(path=path, fs=fs, A=result_model.A, B=result_model.B, C=result_model.C, D=result_model.D)
     result_model.uncertainty = frequency_response_band(core, body, spectra, options.band, options.refine_seconds).to_dict()
@@ -397,7 +397,7 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
         # The longer block did not help on the sweeps: keep the scan's model of that order.
         A, B, C, D, rms = pick.A, pick.B, pick.C, pick.D, pick_rms
     # States the data did not ask for out: poles parked at the block's radius bound, states no balanced
-    # realisation of the full order holds (sysid.reduction).
+    # realisation of the full order holds (sysid.estimation.reduction).
     reduced = without_degenerate_states(A, B, C, D, rms, block, lambda c: time_rms(c, delay), options.min_gain,
                                         options.feedthrough)
     A, B, C, D, rms = reduced.A, reduced.B, reduced.C, reduced.D, reduced.rms

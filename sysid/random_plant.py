@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from .errors import HelmetAncError
-from .lti import block_output_row, real_block_diagonal
-from .model import PATHS, Model
+from .core.errors import HelmetAncError
+from .core.lti import block_output_row, real_block_diagonal
+from .core.model import PATHS, Model
 from .simulate import Session, SessionSpec, simulate_session
 
 __all__ = ["RandomPlant", "random_plant", "random_session", "PLANT_RANGES"]
@@ -205,7 +205,7 @@ def _zoh_modal(A, B, C, D, fs: float):
 
 def _peak_gain(A, B, C, D, fs: float) -> float:
     f = np.geomspace(*_BAND_HZ, 4000)
-    from .lti import frequency_response
+    from .core.lti import frequency_response
 
     return float(np.max(np.abs(frequency_response(A, B, C, D, np.exp(2j * np.pi * f / fs)))))
 

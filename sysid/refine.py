@@ -22,16 +22,16 @@ from dataclasses import dataclass
 
 from . import effects as registry
 from . import refits
-from .compare import Comparison, compare
+from .core.effect_spec import EffectSpec, parse_effect
+from .core.errors import HelmetAncError, IdentificationError
+from .core.model import Model
+from .core.thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT_S, WORSE
 from .diagnose import diagnose
-from .effect_spec import EffectSpec, parse_effect
-from .errors import HelmetAncError, IdentificationError
 from .findings.input_noise import bound_ratio
 from .identify import IdentificationOptions
-from .model import Model
-from .recordings import Recording
+from .io.recordings import Recording
 from .refits import REFIT_OPTIONS, detector_context
-from .thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT_S, WORSE
+from .validation.compare import Comparison, compare
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
            "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement"]

@@ -20,15 +20,15 @@ import scipy.interpolate
 import scipy.signal
 
 from . import effects as registry
-from .data_quality import clipped_samples
-from .effect_spec import EffectSpec, ParameterSpec, parse_effect
-from .errors import HelmetAncError
-from .files import atomic_write, atomic_write_text
-from .model import Model
-from .plants import appendix_a_model
-from .recordings import Recording, write_wav16
-from .structures import series, tf_to_statespace
-from .thresholds import TRANSIENT_S
+from .core.effect_spec import EffectSpec, ParameterSpec, parse_effect
+from .core.errors import HelmetAncError
+from .core.files import atomic_write, atomic_write_text
+from .core.model import Model
+from .core.plants import appendix_a_model
+from .core.structures import series, tf_to_statespace
+from .core.thresholds import TRANSIENT_S
+from .io.data_quality import clipped_samples
+from .io.recordings import Recording, write_wav16
 
 __all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
            "SIMULATED_EFFECTS", "random_effect"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sysid.recordings import write_wav16
+from sysid.io.recordings import write_wav16
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,8 @@ import shutil
 import numpy as np
 import scipy.signal
 
-from sysid.model import Model
-from sysid.plants import appendix_a_model
+from sysid.core.model import Model
+from sysid.core.plants import appendix_a_model
 
 __all__ = ["CMSIS_DECLARATIONS", "FS", "appendix_a_model", "have", "log_sweep", "model_sweeps", "random_stable_model"]
 
@@ -48,7 +48,7 @@ def random_stable_model(seed: int, order: int, path: str = "fb", delay: int = 0,
             poles += [r * np.exp(1j * theta), r * np.exp(-1j * theta)]
         else:
             poles.append(r)
-    from sysid.lti import real_block_diagonal
+    from sysid.core.lti import real_block_diagonal
 
     A = real_block_diagonal(np.array(poles))
     B = rng.standard_normal((order, 1))

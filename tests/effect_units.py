@@ -8,12 +8,12 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from sysid.compare import compare
-from sysid.findings import DiagnosisContext
-from sysid.model import Model
-from sysid.simulate import simulate_session
-
 from conftest import short_spec
+
+from sysid.core.model import Model
+from sysid.findings import DiagnosisContext
+from sysid.simulate import simulate_session
+from sysid.validation.compare import compare
 
 
 @lru_cache(maxsize=None)

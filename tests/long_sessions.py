@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from sysid import lti
-from sysid.recordings import write_wav16_blocks
+from sysid.core import lti
+from sysid.io.recordings import write_wav16_blocks
 from sysid.simulate import Session
 
 BLOCK_SECONDS = 10.0
@@ -70,7 +70,7 @@ _CHILD = r"""
 import json, resource, sys, time
 job = json.loads(sys.argv[1])
 from sysid.identify import IdentificationOptions, identify
-from sysid.recordings import load_recording, open_recording
+from sysid.io.recordings import load_recording, open_recording
 baseline = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 wall, cpu = time.perf_counter(), time.process_time()
 noise = (open_recording if job["streamed"] else load_recording)(job["noise"])

@@ -15,7 +15,7 @@ def _config():
 
 
 # The top-level import packages of the distribution (codegen.templates lives in templates/).
-TOP_PACKAGES = ("helmet_anc", "sysid", "codegen", "anc", "batch")
+TOP_PACKAGES = ("helmet_anc", "sysid", "codegen", "anc", "batch", "report")
 
 
 def _package_folders() -> set[str]:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from sysid.errors import HelmetAncError
-from sysid.grid import parse_range
+from sysid.core.errors import HelmetAncError
+from sysid.estimation.grid import parse_range
 from sysid.identify import IdentificationOptions
 
 ORDER = 60

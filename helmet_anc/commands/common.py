@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sysid.channels import check_channel_order
-from sysid.errors import HelmetAncError
-from sysid.files import check_output_file
+from sysid.core.errors import HelmetAncError
+from sysid.core.files import check_output_file
+from sysid.core.model import Model
 from sysid.identify import Identification
-from sysid.model import Model
-from sysid.recordings import load_recording
-from sysid.validation import check_repeats
+from sysid.io.channels import check_channel_order
+from sysid.io.recordings import load_recording
+from sysid.validation.sweeps import check_repeats
 
 __all__ = ["add_recording_options", "add_force_option", "load_sweeps", "check_channels", "load_model", "check_output",
            "check_report_target", "identification_summary"]
@@ -49,7 +49,7 @@ def load_sweeps(args) -> list:
 
 
 def check_channels(recording, args):
-    """The recording (in memory), after refusing swapped input and ear channels (sysid.channels).
+    """The recording (in memory), after refusing swapped input and ear channels (sysid.io.channels).
 
     Every command that reads recordings reads the two sweeps through ``load_sweeps``, so
     the sweeps are where a swapped session is caught; the message names the fix.

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 
-from sysid.compare import compare, format_comparison
-from sysid.files import atomic_write_text
+from sysid.core.files import atomic_write_text
+from sysid.validation.compare import compare, format_comparison
+
 from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
 
 ORDER = 30

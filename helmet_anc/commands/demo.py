@@ -10,10 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sysid.files import atomic_write_text, staged_output_tree
-from sysid.grid import terminal_progress
+from sysid.core.files import atomic_write_text, staged_output_tree
+from sysid.estimation.grid import terminal_progress
 from sysid.identify import identify
 from sysid.simulate import SessionSpec, simulate_session, write_session
+
 from ..progress import busy
 from .common import identification_summary
 
@@ -24,7 +25,7 @@ DEMO_EFFECTS = ("delay:23", "periodic-disturbance")
 ORDER = 90
 # The demo's own manifest: every file of OUTDIR it wrote (relative path -> SHA-256). A rerun
 # writes into OUTDIR only when everything there is listed in it (or with --force), and
-# replaces or removes only files it lists (sysid.files, "output trees").
+# replaces or removes only files it lists (sysid.core.files, "output trees").
 MANIFEST = "demo-manifest.json"
 MANIFEST_FORMAT = "helmet-anc/demo-manifest@1"
 
@@ -50,9 +51,9 @@ def _firmware(model, outdir: Path, sweep_files) -> str:
 
 def _refinement_loop(model, work: Path, outdir: Path, seed: int):
     """Diagnose the FF model on a session with hidden effects, refine until done, print each step."""
-    from sysid.compare import compare
     from sysid.diagnose import diagnose, format_findings
     from sysid.refine import format_refinement, refine_auto
+    from sysid.validation.compare import compare
 
     session = simulate_session(SessionSpec(path="ff", seed=seed + 1), effects=DEMO_EFFECTS)
     write_session(session, work / "ff-remeasured")
@@ -95,7 +96,7 @@ def _demo(args, work: Path, outdir: Path) -> None:
     with busy("demo: diagnose and refine --auto", args.quiet):
         refined = _refinement_loop(models["ff"][0], work, outdir, args.seed)
     if not args.no_report:
-        from sysid.report import write_report
+        from report import write_report
 
         (work / "reports").mkdir(exist_ok=True)
         with busy("demo: HTML reports", args.quiet):

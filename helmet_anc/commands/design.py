@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sysid.errors import HelmetAncError
-from sysid.files import atomic_write_text, check_output_file
-from sysid.model import Model
-from sysid.recordings import load_recording
+from sysid.core.errors import HelmetAncError
+from sysid.core.files import atomic_write_text, check_output_file
+from sysid.core.model import Model
+from sysid.io.recordings import load_recording
 
 from .common import add_force_option
 
@@ -69,7 +69,7 @@ def run(args) -> int:
     controller = design(fb, ff, disturbance, DesignOptions(latency=args.latency), provenance=provenance)
     controller.save(output)
     if report is not None:
-        from anc.figures import control_page
+        from report.control_figures import control_page
 
         atomic_write_text(report, control_page(controller))
         print(f"wrote {report}")

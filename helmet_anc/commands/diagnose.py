@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import json
 
+from sysid.core.files import atomic_write_text
 from sysid.diagnose import diagnose, format_findings
-from sysid.files import atomic_write_text
-from sysid.recordings import load_recording
+from sysid.io.recordings import load_recording
+
 from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
 
 ORDER = 31

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from sysid.grid import parse_range, terminal_progress
+from sysid.core.files import atomic_write_text
+from sysid.estimation.grid import parse_range, terminal_progress
+from sysid.estimation.spectra import ESTIMATORS
 from sysid.identify import IdentificationOptions, identify
-from sysid.files import atomic_write_text
-from sysid.recordings import open_recording
-from sysid.spectra import ESTIMATORS
-from .common import add_force_option, add_recording_options, check_output, check_report_target, identification_summary, load_sweeps
+from sysid.io.recordings import open_recording
+
+from .common import (add_force_option, add_recording_options, check_output, check_report_target, identification_summary,
+                     load_sweeps)
 
 ORDER = 20
 
@@ -45,7 +47,7 @@ def run(args) -> int:
     if mat:
         result.model.save_mat(mat)
     if report_target:
-        from sysid.report import write_report
+        from report import write_report
 
         # The report diagnoses the whole noise recording, in memory.
         report = write_report(report_target, result.model, noise.load(), sweeps, identification=result)

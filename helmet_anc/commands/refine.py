@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import sys
 
-from sysid.errors import HelmetAncError
-from sysid.model import Model
-from sysid.recordings import load_recording
+from sysid.core.errors import HelmetAncError
+from sysid.core.model import Model
+from sysid.io.recordings import load_recording
 from sysid.refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
+
 from ..progress import busy
 from .common import add_force_option, add_recording_options, check_output, check_report_target, load_sweeps
 
@@ -55,7 +56,7 @@ def run(args) -> int:
     print(format_refinement(steps, stop_reason))
     print(f"wrote {output}")
     if report_target:
-        from sysid.report import write_report
+        from report import write_report
 
         print(f"wrote {write_report(report_target, model, noise, sweeps)}")
     return 0

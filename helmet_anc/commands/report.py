@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from sysid.errors import HelmetAncError
-from sysid.recordings import load_recording
-from sysid.report.data import GRID_CHOICES
+from report.data import GRID_CHOICES
+from sysid.core.errors import HelmetAncError
+from sysid.io.recordings import load_recording
+
 from ..progress import busy
 from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
 
@@ -33,8 +34,8 @@ def control_section(path: str, model, dpi: float) -> tuple[str, str, str]:
     predictions of a design on each of the two models (anc.refinement)."""
     from anc import Controller
     from anc.closed_loop import predicted_and_achieved
-    from anc.figures import control_section as section_html
     from anc.refinement import attenuation_along
+    from report.control_figures import control_section as section_html
 
     controller = Controller.load(path)
     if controller.fs != model.fs:
@@ -61,9 +62,7 @@ def run(args) -> int:
     model = load_model(args.model)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
-    from sysid.report.html import (
-        write_report,  # matplotlib loads only when a report is made
-    )
+    from report.html import write_report
 
     with busy("report: grid, diagnosis and figures", args.quiet):
         extra = [control_section(args.controller, model, args.dpi)] if args.controller else []

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sysid.errors import HelmetAncError
-from sysid.files import OutputRefused, check_output_file, is_ours
-from sysid.effect_spec import parse_effect
+from sysid.core.effect_spec import parse_effect
+from sysid.core.errors import HelmetAncError
+from sysid.core.files import OutputRefused, check_output_file, is_ours
 from sysid.random_plant import random_session
 from sysid.simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
 

@@ -2,7 +2,7 @@
 
 An ``Effect`` holds everything the product knows about one physical effect a
 low-order model misses (effects.md): its name, its parameters with units and
-ranges (``sysid.effect_spec.ParameterSpec``) for ``simulate --effect`` and for
+ranges (``sysid.core.effect_spec.ParameterSpec``) for ``simulate --effect`` and for
 ``refine --add``, how ``simulate`` adds it (a series factor, or the session
 simulator's own code for the effects that act on the recordings), its detector
 (score, significance, estimates, explanation, remedy; ``sysid.findings``), the
@@ -24,13 +24,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable
 
-from ..effect_spec import ParameterSpec
-from ..errors import HelmetAncError
+from ..core.effect_spec import ParameterSpec
+from ..core.errors import HelmetAncError
 
 __all__ = ["Effect", "register", "unregister", "registered", "get", "effects", "names", "detector_order",
            "FIGURES"]
 
-# The figure kinds of the report (``sysid.report.diagnosis_figures``): delay-scan (fit cost against
+# The figure kinds of the report (``report.diagnosis_figures``): delay-scan (fit cost against
 # the delay), series-factor (measured/model response with the fitted factor over it), harmonics
 # (error spectrogram with the sweep's harmonics), lines (residual spectrum with the lines), h1-h2,
 # segments (per-segment responses and delays), levels (per-channel bars), mismatch (measured/model).

@@ -2,14 +2,14 @@
 
 Simulated as an ear channel whose clean peak is ``peak`` times the clip ``level`` (FS);
 detected as flat tops at any level on either channel and a histogram spike at the clip
-level (``sysid.data_quality``, ``sysid.findings.data_quality.clipping_finding``);
+level (``sysid.io.data_quality``, ``sysid.findings.data_quality.clipping_finding``);
 corrected by leaving the clipped stretches out of identification and validation
 (the model's ``excluded``; ``sysid.refits.add_clipping``).
 """
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
 from ..findings.data_quality import clipping_finding
 from ..refits import add_clipping, with_clipping
 from . import Effect, register

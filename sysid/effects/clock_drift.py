@@ -8,8 +8,8 @@ as ``clock_ratio`` (``sysid.refits.add_clock_drift``).
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
-from ..errors import IdentificationError
+from ..core.effect_spec import ParameterSpec
+from ..core.errors import IdentificationError
 from ..findings.variation import clock_drift_finding
 from ..refits import add_clock_drift, with_clock_drift
 from . import Effect, register

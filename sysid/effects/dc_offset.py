@@ -8,8 +8,8 @@ the recordings and, on the ear channel, from the silence before each sweep
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
-from ..errors import IdentificationError
+from ..core.effect_spec import ParameterSpec
+from ..core.errors import IdentificationError
 from ..findings.data_quality import dc_offset_finding
 from ..refits import add_dc_offset, with_dc_offset
 from . import Effect, register

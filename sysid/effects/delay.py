@@ -8,8 +8,8 @@ line and the core re-identified behind it (``sysid.refits.add_delay``).
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
-from ..errors import IdentificationError
+from ..core.effect_spec import ParameterSpec
+from ..core.errors import IdentificationError
 from ..findings.delay import delay_finding, scan_delay
 from ..refits import add_delay
 from . import Effect, register

@@ -7,10 +7,10 @@ by the factor in series in front of the core (``sysid.refits.add_highpass``).
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
+from ..core.structures import factor_coefficients
 from ..findings.dynamics import dynamics_findings
 from ..refits import add_highpass
-from ..structures import factor_coefficients
 from . import Effect, register
 from .series import complete_factor
 

@@ -11,7 +11,7 @@ validates below that bound, which ``refine --auto`` names when it stops there.
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
 from ..findings.input_noise import input_noise_density, input_noise_finding
 from ..refits import add_input_noise
 from . import Effect, register

@@ -10,7 +10,7 @@ misfit it must not mistake for harmonics); refined by a Hammerstein input polyno
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
 from ..findings.nonlinearity import nonlinearity_finding
 from ..refits import add_input_nonlinearity
 from . import Effect, register

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
+from ..core.structures import factor_coefficients
 from ..findings.dynamics import dynamics_findings
 from ..refits import add_lowpass
-from ..structures import factor_coefficients
 from . import Effect, register
 from .series import complete_factor
 

@@ -5,15 +5,15 @@ detected as residual lines absent from the input (``sysid.findings.disturbance``
 modelled as a disturbance (sinusoids fitted per recording and removed before the fit),
 not a part of the plant (``sysid.refits.add_periodic_disturbance``). Identification already
 takes the session's lines out of the recordings it fits and validates on, and out of the noise
-floor (``sysid.lines``, ``sysid.validation.without_repeat_lines``): the model's core is not bent
+floor (``sysid.io.lines``, ``sysid.validation.sweeps.without_repeat_lines``): the model's core is not bent
 toward them, and its error against the raw sweeps, the hum, stands above the floor for this
 finding to name.
 """
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
-from ..errors import IdentificationError
+from ..core.effect_spec import ParameterSpec
+from ..core.errors import IdentificationError
 from ..findings.disturbance import disturbance_finding
 from ..refits import add_periodic_disturbance
 from . import Effect, register

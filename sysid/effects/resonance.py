@@ -1,7 +1,7 @@
 """resonance: a mode the model lacks - ear-canal quarter wave, helmet cavity (effects.md).
 
 Simulated as a peaking biquad (f0 in Hz, Q, gain in dB) in series with the plant
-(``sysid.structures``); detected by fitting the series factor families to the sweeps
+(``sysid.core.structures``); detected by fitting the series factor families to the sweeps
 (``sysid.findings.dynamics.dynamics_findings``, which judges resonance, high-pass and
 low-pass together and keeps at most one); refined by the peaking factor in series
 (gain given) or by one more mode started at f0, Q (``sysid.refits.add_resonance``).
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
+from ..core.structures import factor_coefficients
 from ..findings.dynamics import dynamics_findings
 from ..refits import add_resonance
-from ..structures import factor_coefficients
 from . import Effect, register
 from .series import complete_factor
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import IdentificationError
+from ..core.errors import IdentificationError
 from ..findings.dynamics import GAIN, fit_factor
 
 __all__ = ["complete_factor"]

@@ -9,7 +9,7 @@ that changes: it is reported, and the user identifies per condition.
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
 from ..findings.variation import time_variation_finding
 from . import Effect, register
 

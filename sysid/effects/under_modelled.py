@@ -8,7 +8,7 @@ floor that nothing named explains; refined by more order (``sysid.refits.add_ord
 
 from __future__ import annotations
 
-from ..effect_spec import ParameterSpec
+from ..core.effect_spec import ParameterSpec
 from ..findings.under_modelled import under_modelled_finding
 from ..refits import add_order
 from . import Effect, register

@@ -22,10 +22,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..compare import Comparison
-from ..model import Model
-from ..recordings import Recording
-from ..thresholds import TRANSIENT_S
+from ..core.model import Model
+from ..core.thresholds import TRANSIENT_S
+from ..io.recordings import Recording
+from ..validation.compare import Comparison
 
 __all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "SPEED_OF_SOUND", "PROVIDERS",
            "provider", "uses"]

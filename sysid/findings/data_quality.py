@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..corrections import recording_key
-from ..data_quality import DC_ABSOLUTE, RAILS_16BIT, clipped_samples, clipped_stretches, dc_offset
-from ..lines import find_lines, fit_sinusoids
-from ..recordings import Recording
-from ..thresholds import IDENTIFICATION_BAND
-from ..validation import SKIP_S
+from ..core.thresholds import IDENTIFICATION_BAND
+from ..io.corrections import recording_key
+from ..io.data_quality import DC_ABSOLUTE, RAILS_16BIT, clipped_samples, clipped_stretches, dc_offset
+from ..io.lines import find_lines, fit_sinusoids
+from ..io.recordings import Recording
+from ..validation.sweeps import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction, provider, uses
 
 __all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of", "session_lines", "ear_without_lines",
@@ -59,7 +59,7 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
     """Offsets of the input channels, and of the ear channel against the model's prediction.
 
     The noise excitation and the sweeps are zero-mean, so an input mean is an offset
-    (``sysid.data_quality.dc_offset``). An ear signal may have a genuine mean (a path
+    (``sysid.io.data_quality.dc_offset``). An ear signal may have a genuine mean (a path
     with large DC gain, a model that lacks a high-pass), so the ear offset is read
     where the path is at rest: the silence before each sweep, where the input is
     ``SILENT`` of its RMS or less; the model's prediction there (its ``output_offset``)
@@ -191,7 +191,7 @@ def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = No
 
 @uses("noise-prediction", "session-lines")
 def clipping_finding(ctx: DiagnosisContext) -> dict:
-    """Clipping at any level on either channel of any recording (``sysid.data_quality.clipped_samples``;
+    """Clipping at any level on either channel of any recording (``sysid.io.data_quality.clipped_samples``;
     on the ear channel also against the model's prediction, where noise after the clipper hides the
     flat tops from the histogram), after the session's lines are taken out of the ear signals
     (``ear_without_lines``: a hum added after the clipper smears the flat tops)."""

@@ -2,7 +2,7 @@
 
 For each candidate delay d the model's zeros, gain and block transient are re-fitted
 by linear least squares on the raw DFT of the noise recording (the linear step of
-``sysid.output_error``), poles fixed. A delay the model lacks shows as a clear
+``sysid.estimation.output_error``), poles fixed. A delay the model lacks shows as a clear
 minimum of that cost at d > current delay; 1 sample is 22.7 us or 0.78 cm of sound
 path at 44.1 kHz. A short delay moves that cost little; when the scan is not
 decisive, quick output-error refits with and without the delay are compared on
@@ -15,11 +15,11 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .. import lti
-from ..output_error import BlockData, block_data, linear_cost, refine_output_error
-from ..recordings import Recording
-from ..thresholds import EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG
-from ..validation import VALIDATION_BAND, rms_from_responses, sweep_spectrum
+from ..core import lti
+from ..core.thresholds import EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG
+from ..estimation.output_error import BlockData, block_data, linear_cost, refine_output_error
+from ..io.recordings import Recording
+from ..validation.sweeps import VALIDATION_BAND, rms_from_responses, sweep_spectrum
 from . import SPEED_OF_SOUND, DiagnosisContext, finding, provider, uses
 from .dynamics import arbitrate, series_factor_finding
 

@@ -1,10 +1,10 @@
 """Periodic disturbance: spectral lines in the residual that are not in the input (effects.md).
 
 The lines of the model's residual on the noise recording that the input lacks
-(``sysid.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
+(``sysid.io.lines.find_lines``: more than ``LINE_RATIO`` times the median of their
 neighbourhood; the session's one line search, the shared value ``session-lines`` of
 ``sysid.findings.data_quality``, which searches the noise recording first with the model's
-own lines known) and does not explain (``sysid.lines.driven`` on the residual after the
+own lines known) and does not explain (``sysid.io.lines.driven`` on the residual after the
 transient: a mode the model lacks peaks in the residual too, coherent with the input), each
 of which must also be present in both sweep residuals.
 """
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lines import LINE_RATIO, driven, fit_sinusoids
-from ..validation import SKIP_S
+from ..io.lines import LINE_RATIO, driven, fit_sinusoids
+from ..validation.sweeps import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction, uses
 from .dynamics import factor_residual, has_series_factor, within_resonance
 

@@ -2,7 +2,7 @@
 
 What a model lacks in series with it shows on the sweeps as the ratio of the
 measured to the predicted ear signal. For each family of factors F_theta of
-``sysid.structures`` the parameters are fitted to the sweeps' DFT bins inside the
+``sysid.core.structures`` the parameters are fitted to the sweeps' DFT bins inside the
 validation band,
 
     min_theta  sum_sweeps (2 / L) sum_k |Y_k - F_theta(f_k) P_k|^2,
@@ -37,9 +37,9 @@ import numpy as np
 import scipy.optimize
 import scipy.signal
 
-from .. import structures
-from ..thresholds import EXCESS, EXPLAINS_GAIN
-from ..validation import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
+from ..core import structures
+from ..core.thresholds import EXCESS, EXPLAINS_GAIN
+from ..validation.sweeps import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
 from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins",

@@ -22,9 +22,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..recordings import Recording
-from ..thresholds import AT_FLOOR
-from ..validation import VALIDATION_BAND, noise_floor
+from ..core.thresholds import AT_FLOOR
+from ..io.recordings import Recording
+from ..validation.sweeps import VALIDATION_BAND, noise_floor
 from . import DiagnosisContext, finding, uses
 
 __all__ = ["input_noise_finding", "input_noise_density", "input_noise_error", "bound_ratio", "bound_share"]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..validation import SKIP_S, VALIDATION_BAND
+from ..validation.sweeps import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding, linear_part, uses
 from .dynamics import has_series_factor, with_series_factor
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import Comparison
-from ..structures import mode_block, with_states
-from ..thresholds import EXCESS, EXPLAINS_GAIN, UNDER_MODELLED_EXCESS
-from ..validation import VALIDATION_BAND
+from ..core.structures import mode_block, with_states
+from ..core.thresholds import EXCESS, EXPLAINS_GAIN, UNDER_MODELLED_EXCESS
+from ..validation.compare import Comparison
+from ..validation.sweeps import VALIDATION_BAND
 from . import DiagnosisContext, finding, uses
 from .delay import refit_rms
 

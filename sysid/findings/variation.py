@@ -19,11 +19,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..compare import third_octave_bands
-from ..data_quality import clipped_samples
-from ..lines import without_lines
-from ..thresholds import EXCESS, IDENTIFICATION_BAND
-from ..validation import SKIP_S, VALIDATION_BAND
+from ..core.thresholds import EXCESS, IDENTIFICATION_BAND
+from ..io.data_quality import clipped_samples
+from ..io.lines import without_lines
+from ..validation.compare import third_octave_bands
+from ..validation.sweeps import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding", "recording_change",

@@ -1,0 +1,35 @@
+"""delay: the fixed-pole scan finds a missing delay exactly, and a long one leads the ranking."""
+
+import pytest
+from effect_units import true_context
+
+from sysid import effects
+from sysid.core.thresholds import LEADING_PHASE_DEG
+from sysid.findings.delay import delay_finding, scan_delay
+
+
+@pytest.mark.parametrize("samples", [3, 23])
+def test_the_scan_finds_the_missing_delay_of_the_true_plant(samples):
+    ctx = true_context("ff", 5, (f"delay:{samples}",))
+    best, costs = scan_delay(ctx)
+    assert best == samples
+    assert costs[0] > 2 * costs[best]
+
+
+def test_a_long_missing_delay_leads_and_a_short_one_does_not():
+    long = delay_finding(true_context("ff", 5, ("delay:23",)))
+    assert long["significant"] and long["params"]["samples"] == 23 and long["evidence"]["leads"]
+    assert long["evidence"]["excess_phase_deg"] == pytest.approx(360 * 4000 * 23 / 44100)
+    short = delay_finding(true_context("ff", 5, ("delay:2",)))
+    assert short["evidence"]["excess_phase_deg"] < LEADING_PHASE_DEG and not short["evidence"]["leads"]
+
+
+def test_no_delay_on_the_true_plant():
+    found = delay_finding(true_context("ff", 5, ()))
+    assert not found["significant"] and found["params"]["samples"] == 0
+
+
+def test_the_registry_entry():
+    delay = effects.get("delay")
+    assert delay.detect is delay_finding and set(delay.needs) == {"resonance", "highpass", "lowpass"}
+    assert delay.auto_params({"samples": 7, "total_samples": 9}) == {"samples": 7}
