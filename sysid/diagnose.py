@@ -40,8 +40,8 @@ from . import effects as registry
 from .core.errors import IdentificationError
 from .core.model import Model
 from .core.thresholds import TRANSIENT_S
-from .findings import DiagnosisContext, Finding
-from .io.corrections import corrected
+from .findings import Finding
+from .findings.context import detector_context
 from .io.recordings import Recording, check_same_rate
 from .validation.compare import compare
 
@@ -102,9 +102,7 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         comparison = comparison or compare(model, sweeps)
         cpu_seconds = {"compare": time.process_time() - clock}
         # The detectors see the recordings as the model does: the ear clock resampled by its clock_ratio.
-        noise = corrected(noise, model.clock_ratio)
-        sweeps = [corrected(s, model.clock_ratio) for s in sweeps]
-        ctx = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
+        ctx = detector_context(model, noise, sweeps, comparison, transient_s)
         findings = ctx.findings
         for detector in registry.detector_order():
             # A detector that declares nothing (a user's effect written before ``uses``) reads freely.

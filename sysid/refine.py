@@ -27,10 +27,11 @@ from .core.errors import HelmetAncError, IdentificationError
 from .core.model import Model
 from .core.thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT_S, WORSE
 from .diagnose import diagnose
+from .findings.context import detector_context
 from .findings.input_noise import bound_ratio
 from .identify import IdentificationOptions
 from .io.recordings import Recording
-from .refits import REFIT_OPTIONS, detector_context
+from .refits import REFIT_OPTIONS
 from .validation.compare import Comparison, compare
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",

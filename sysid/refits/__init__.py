@@ -57,7 +57,7 @@ from ..estimation.masked_output_error import refine_masked
 from ..estimation.output_error import BlockData, block_data, refine_output_error
 from ..estimation.spectra import estimate_spectra
 from ..estimation.uncertainty import frequency_response_band
-from ..findings import DiagnosisContext
+from ..findings.context import detector_context
 from ..findings.data_quality import clipped_stretches_of, session_lines
 from ..findings.nonlinearity import nonlinearity_finding
 from ..findings.under_modelled import START_Q, worst_bands
@@ -71,7 +71,7 @@ from ..validation.sweeps import VALIDATION_BAND
 __all__ = ["REFIT_OPTIONS", "add_delay", "add_input_nonlinearity", "add_periodic_disturbance", "series_factor",
            "add_resonance", "add_highpass", "add_lowpass", "add_mode", "add_order", "add_input_noise", "add_dc_offset",
            "add_clock_drift", "add_clipping", "with_dc_offset", "with_clock_drift", "with_clipping", "correct_data",
-           "detector_context", "clock_residual", "refined_clock"]
+           "clock_residual", "refined_clock"]
 
 # The re-identification's grid: the seed's orders, gamma step 30 (as the test sessions use).
 REFIT_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)), refine_seconds=5.0)
@@ -669,8 +669,3 @@ def correct_data(model, noise, sweeps, corrections, options, transient_s):
         extra["clock_ratio"] = best.clock_ratio
     return best, extra
 
-
-def detector_context(model, noise, sweeps, comparison, transient_s) -> DiagnosisContext:
-    """What the detectors see: the recordings with the model's clock correction."""
-    return DiagnosisContext(model, corrected(noise, model.clock_ratio), [corrected(s, model.clock_ratio) for s in sweeps],
-                            comparison, transient_s)
