@@ -66,6 +66,43 @@ LINE_RATIO = 40.0
 # Recordings and their data quality (sysid.io).
 # ---------------------------------------------------------------------------------------------------------------------
 
+# The ear channel heard (sysid.io.ear_channel). An ear channel below half a 16-bit LSB (RMS) is
+# digital silence: nothing is connected.
+SILENT_RMS = 2.0**-16
+# Median magnitude-squared coherence between input and ear channel, in EAR_COHERENCE_BAND_HZ, below
+# which the ear microphone does not hear the path at all. It is estimated on stretches short enough
+# that an ear clock off by up to a few hundred ppm (effects.md, clock drift) slips by no more than
+# a few samples inside one: over a whole recording such a slip turns the cross-spectrum's phase
+# and the averaged coherence of a healthy channel collapses above a few hundred Hz (60 ppm over
+# 20 s: median 0.01). A sweep, whose every frequency is excited only briefly, is judged over the
+# whole recording instead (a stretch of it excites a few bins only): the larger of the two counts.
+UNCORRELATED_COHERENCE = 0.1
+EAR_COHERENCE_BAND_HZ = (100.0, 4000.0)
+# Welch segment of that coherence (samples), and up to EAR_COHERENCE_STRETCHES stretches of
+# EAR_COHERENCE_STRETCH samples spread over the recording.
+EAR_COHERENCE_SEGMENT = 512
+EAR_COHERENCE_STRETCH = 32 * EAR_COHERENCE_SEGMENT
+EAR_COHERENCE_STRETCHES = 8
+
+# Which channel is the input (sysid.io.channels: the direction of the path's group delay).
+# Segment of the spectra: 2048 samples resolve 21.5 Hz at 44.1 kHz, enough to unwrap the
+# phase of a path delayed by up to 1024 samples (23 ms, 8 m of sound path).
+CHANNEL_ORDER_SEGMENT = 2048
+# Band (Hz) of the group delay: the sweeps' band less its lowest octaves, where a high-pass leaves
+# little coherence.
+CHANNEL_ORDER_BAND_HZ = (100.0, 4000.0)
+# Bins whose magnitude-squared coherence is below this carry no usable phase.
+CHANNEL_ORDER_COHERENT = 0.5
+# Fewer coherent bins than this: no judgement (the ear checks of sysid.io.ear_channel apply).
+CHANNEL_ORDER_MIN_BINS = 16
+# A mean group delay of at least this many samples (either sign) tells the order.
+CHANNEL_ORDER_LEAD_SAMPLES = 1.0
+# At most this much of a recording is examined (s): the direction does not change along it.
+CHANNEL_ORDER_EXCERPT_S = 10.0
+__all__ += ["SILENT_RMS", "UNCORRELATED_COHERENCE", "EAR_COHERENCE_BAND_HZ", "EAR_COHERENCE_SEGMENT",
+            "EAR_COHERENCE_STRETCH", "EAR_COHERENCE_STRETCHES", "CHANNEL_ORDER_SEGMENT", "CHANNEL_ORDER_BAND_HZ",
+            "CHANNEL_ORDER_COHERENT", "CHANNEL_ORDER_MIN_BINS", "CHANNEL_ORDER_LEAD_SAMPLES", "CHANNEL_ORDER_EXCERPT_S"]
+
 
 
 # ---------------------------------------------------------------------------------------------------------------------

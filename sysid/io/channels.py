@@ -15,13 +15,15 @@ of the unwrapped phase of H against angular frequency in rad/sample, so tau is i
 
 Measured on sessions of the appendix-A plants (seeds 0-1) and of random helmet paths
 (``sysid.random_plant``, seeds 0-40, both paths; noise, 1-2 s sweeps; see
-tests/test_channels.py and BENCHMARKS.md): in the right order tau is 1.7 to 74 samples,
+tests/sysid/io/test_channels.py and BENCHMARKS.md): in the right order tau is 1.7 to 74 samples,
 swapped it is -1.7 to -74. The channels are called swapped when tau is at most
 ``-LEAD_SAMPLES``; the order is unclear (a warning) when |tau| is below it: a path with
 no latency and no lag, a pure gain, looks the same both ways round.
 
 Silent and unrelated ear channels are refused where recordings are read
-(``sysid.io.recordings``); this check needs both channels coherent.
+(``sysid.io.recordings``, by ``sysid.io.ear_channel``); this check needs both channels
+coherent. The tunables (``SEGMENT``, ``BAND_HZ``, ``COHERENT``, ``MIN_BINS``,
+``LEAD_SAMPLES``, ``EXCERPT_S``) are ``sysid.core.thresholds``' ``CHANNEL_ORDER_*``.
 """
 
 from __future__ import annotations
@@ -33,23 +35,16 @@ import numpy as np
 import scipy.signal
 
 from ..core.errors import RecordingError
+from ..core.thresholds import CHANNEL_ORDER_BAND_HZ as BAND_HZ
+from ..core.thresholds import CHANNEL_ORDER_COHERENT as COHERENT
+from ..core.thresholds import CHANNEL_ORDER_EXCERPT_S as EXCERPT_S
+from ..core.thresholds import CHANNEL_ORDER_LEAD_SAMPLES as LEAD_SAMPLES
+from ..core.thresholds import CHANNEL_ORDER_MIN_BINS as MIN_BINS
+from ..core.thresholds import CHANNEL_ORDER_SEGMENT as SEGMENT
 from .recordings import RecordingWarning
 
 __all__ = ["ChannelOrder", "channel_order", "check_channel_order", "ChannelOrderWarning", "EXCERPT_S", "LEAD_SAMPLES",
            "COHERENT"]
-
-# Segment of the spectra: 2048 samples resolve 21.5 Hz at 44.1 kHz, enough to unwrap the
-# phase of a path delayed by up to 1024 samples (23 ms, 8 m of sound path).
-SEGMENT = 2048
-BAND_HZ = (100.0, 4000.0)
-# Bins whose magnitude-squared coherence is below this carry no usable phase.
-COHERENT = 0.5
-# Fewer coherent bins than this: no judgement (the ear checks of sysid.io.recordings apply).
-MIN_BINS = 16
-# A mean group delay of at least this many samples (either sign) tells the order.
-LEAD_SAMPLES = 1.0
-# At most this much of a recording is examined (s): the direction does not change along it.
-EXCERPT_S = 10.0
 
 
 class ChannelOrderWarning(RecordingWarning):
