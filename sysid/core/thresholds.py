@@ -48,6 +48,16 @@ LINE_RATIO = 40.0
 # Identification: the order search, the settling of a pick, the reduction (sysid.identify, sysid.estimation).
 # ---------------------------------------------------------------------------------------------------------------------
 
+# Output-error refinement (sysid.estimation.output_error, sysid.estimation.modal_parametrisation).
+# A pole counts as at the radius bound when its decay rate -ln|p| is within this fraction above
+# the bound's (``at_radius_bound``).
+AT_RADIUS_BOUND = 0.01
+# A pair whose angle is below NEAR_REAL_PAIR times its decay rate is refined as two real poles
+# (``split_near_real_pairs``), of decay rates NEAR_REAL_SPLIT above and below the pair's.
+NEAR_REAL_PAIR = 1e-3
+NEAR_REAL_SPLIT = 0.1
+__all__ += ["AT_RADIUS_BOUND", "NEAR_REAL_PAIR", "NEAR_REAL_SPLIT"]
+
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -20,6 +20,15 @@ the maximum-likelihood criterion for white output noise. Poles are parametrised 
 that every iterate is stable and no slower than the block can resolve: a complex pair as
 r e^{+-j theta} with r = exp(-exp(sigma) - 1/L), a real pole as exp(-1/L) tanh(xi), L the
 block's length (``decay_bound``).
+
+The step's parts: the block's DFT bins (``sysid.estimation.output_error_data``), the
+modal parametrisation, its basis and the decay bound
+(``sysid.estimation.modal_parametrisation``) and the linear least squares solved at every
+evaluation (``sysid.estimation.least_squares``). Here: the criterion and its Jacobian, the
+Levenberg-Marquardt driver ``refine_output_error``, and the costs with the poles held
+fixed (``linear_cost``, ``added_pole_costs``, ``residual_spectrum``). ``BlockData``,
+``block_data``, ``modal_basis``, ``decay_bound``, ``radius_bound_mask``,
+``at_radius_bound`` and ``split_near_real_pairs`` are importable from here as well.
 """
 
 from __future__ import annotations
@@ -27,189 +36,27 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.optimize
-from scipy.linalg import blas, lapack
 from threadpoolctl import ThreadpoolController
 
 from ..core import lti
 from ..core.errors import IdentificationError
-from ..core.thresholds import IDENTIFICATION_BAND
-from ..io.recordings import Recording
-from ..validation.sweeps import rfft_pair
+from .least_squares import qr_solve
+from .modal_parametrisation import (at_radius_bound, decay_bound, modal_basis, params_to_poles, pole_derivatives,
+                                    poles_to_params, radius_bound_mask, split_near_real_pairs)
+from .output_error_data import BlockData, block_data
 
 # BLAS libraries found once at import (numpy's and scipy's are loaded by then); limiting
 # through it costs microseconds, threadpool_limits() rescans the process's libraries (4 ms).
 _BLAS = ThreadpoolController()
 
 __all__ = ["BlockData", "block_data", "OutputErrorFit", "refine_output_error", "modal_basis", "linear_cost",
-           "residual_spectrum", "added_pole_costs", "decay_bound", "at_radius_bound", "radius_bound_mask"]
+           "residual_spectrum", "added_pole_costs", "decay_bound", "at_radius_bound", "radius_bound_mask",
+           "split_near_real_pairs"]
 
-
-@dataclass
-class BlockData:
-    """DFT bins of one data block inside the band: z_k, U_k, Y_k, and the block length."""
-
-    z: np.ndarray
-    U: np.ndarray
-    Y: np.ndarray
-    length: int
-    fs: float
-
-
-def block_data(noise: Recording, band=IDENTIFICATION_BAND, max_seconds: float | None = 10.0) -> BlockData:
-    """The band's DFT bins of (at most max_seconds of) a noise recording after its transient."""
-    n = noise.u.size if max_seconds is None else min(noise.u.size, int(round(max_seconds * noise.fs)))
-    if n < 16:
-        raise IdentificationError(f"{noise.path}: too short for output-error refinement")
-    f = np.fft.rfftfreq(n, 1 / noise.fs)
-    inside = (f >= band[0]) & (f <= band[1])
-    u = noise.u[:n] - noise.u[:n].mean()
-    y = noise.y[:n] - noise.y[:n].mean()
-    U, Y = rfft_pair(u, y)
-    return BlockData(np.exp(2j * np.pi * f[inside] / noise.fs), U[inside], Y[inside], n, noise.fs)
-
-
-def modal_basis(A_block: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Columns C (zI - A)^-1 e_j for a real block-diagonal A (M x n), in closed form per block.
-
-    Column-major, each column written contiguously."""
-    n = A_block.shape[0]
-    basis = np.empty((z.size, n), dtype=complex, order="F")
-    i = 0
-    while i < n:
-        if i + 1 < n and A_block[i, i + 1] != 0:
-            a, b = A_block[i, i], A_block[i, i + 1]
-            # (zI - [[a, b], [-b, a]])^-1 = [[z - a, b], [-b, z - a]] / ((z - a)^2 + b^2)
-            # Each quotient written straight into its column, the numerators into one scratch array
-            # (the same operations and operand order as the plain expressions: the same bits).
-            shifted = z - a
-            den = np.square(shifted)
-            den += b**2
-            c0, c1 = C[0, i], C[0, i + 1]
-            numerator = np.multiply(c0, shifted)
-            numerator -= c1 * b
-            np.divide(numerator, den, out=basis[:, i])
-            np.multiply(c1, shifted, out=numerator)
-            np.add(c0 * b, numerator, out=numerator)
-            np.divide(numerator, den, out=basis[:, i + 1])
-            i += 2
-        else:
-            shifted = z - A_block[i, i]
-            np.divide(C[0, i], shifted, out=basis[:, i])
-            i += 1
-    return basis
-
-
-# A pole counts as at the radius bound when its decay rate -ln|p| is within this fraction above
-# the bound's (``at_radius_bound``).
-_AT_BOUND = 0.01
-# Decay bound without a block: stability alone (|p| <= 1 - 1e-9).
-_STABLE = 1e-9
-# A pair whose angle is below this fraction of its decay rate is refined as two real poles
-# (``split_near_real_pairs``), of decay rates this fraction above and below the pair's.
-_NEAR_REAL = 1e-3
-_NEAR_REAL_SPLIT = 0.1
-# Largest condition number of a regressor solved through its Gram matrix (``_Factor``).
-_GRAM_CONDITION = 1e5
-# Distance (relative to the unit column norm) from the span of the other columns below which a column is
-# tried as dependent (``_Factor``): Gram-matrix pivoting resolves distances down to about sqrt(eps).
-_DEPENDENT_DISTANCE = 1e-6
-_UNIT_ROUNDOFF = np.finfo(float).eps / 2
-
-
-def decay_bound(data: "BlockData") -> float:
-    """Smallest decay rate -ln|p| (per sample) of a pole refined on the block: 1/L, L its length.
-
-    A pole whose time constant -1/ln|p| is longer than the block's L samples cannot be told
-    from the block's transient term (the x_delta columns): the data do not resolve it. Before
-    this bound (|p| <= 1 - 1e-9) spare poles ran to z = 1 or z = -1 out of the fitted band,
-    invisible in the sweeps' spectra but ringing in the simulated sweeps (random helmet 41, short
-    session: a pair at 23944 Hz and a real pole at z = -1 with large residues cancelling in band,
-    70000x the floor in simulation) and in a controller built on the model. Lightly damped
-    in-band modes stay reachable: Q 50 at 30 Hz and 48 kHz is 1 - |p| = pi 30 / (50 48000) =
-    3.9e-5, above 1/L = 2.1e-5 for a 1 s block (2.1e-6 for 10 s). A tighter bound out of the band
-    (the decay of a Q 50 mode at the pole's distance from it) put two random helmets above the floor
-    (thesis-length 13: 1.21x, short 1: 1.41x, both at the floor with 1/L alone) and is not used.
-    """
-    return 1.0 / data.length
-
-
-def radius_bound_mask(poles: np.ndarray, data: "BlockData") -> np.ndarray:
-    """Which of ``poles`` sit at the block's ``decay_bound`` (decay -ln|p| within 1 % of it): poles
-    the block could not hold, run out to the limit of the parametrisation."""
-    decay = -np.log(np.maximum(np.abs(np.asarray(poles)), 1e-300))
-    return decay <= (1 + _AT_BOUND) * decay_bound(data)
-
-
-def at_radius_bound(poles: np.ndarray, data: "BlockData") -> bool:
-    """Whether any of ``poles`` sits at the block's ``decay_bound`` (``radius_bound_mask``)."""
-    return bool(np.any(radius_bound_mask(poles, data)))
-
-
-def _poles_to_params(poles: np.ndarray, margin: float = _STABLE) -> tuple[np.ndarray, int]:
-    """Parameter vector (sigma, theta per upper-half-plane pair, then xi per real pole) under the
-    decay bound ``margin`` (-ln of the largest radius; ``decay_bound``); poles beyond it start inside it."""
-    pairs = [p for p in poles if p.imag > 1e-12]
-    reals = [p.real for p in poles if abs(p.imag) <= 1e-12]
-    params = []
-    for p in pairs:
-        r = min(abs(p), 1 - 1e-12)
-        # A start at or beyond the bound begins a tenth of the bound's decay inside it, where sigma still moves it.
-        params += [np.log(max(-np.log(r) - margin, 0.1 * margin)), np.angle(p)]
-    params += [np.arctanh(np.clip(p / np.exp(-margin), -1 + 1e-12, 1 - 1e-12)) for p in reals]
-    return np.array(params, dtype=float), len(pairs)
-
-
-def split_near_real_pairs(poles: np.ndarray, margin: float = _STABLE) -> np.ndarray:
-    """The poles with every nearly real pair replaced by two real poles of nearby decay rates.
-
-    A pair r e^{+-j theta} whose angle theta is below _NEAR_REAL times its decay rate d = -ln r is a
-    double real pole in all but name; the cost is even in theta there, so its theta column of the
-    Jacobian vanishes (2.3e-7 of the largest on random helmet 17's final 10 s block, theta = 1.1e-7,
-    d = 0.015), the scaled Gauss-Newton step along it is unbounded (12 rad), and the trust region
-    crawls: 44 evaluations for 0.42 % of the cost. The parametrisation holds a pair in the upper half
-    plane, so a pair the data want as two distinct real poles (two roll-off corners) runs to theta = 0
-    and stays there. The two real poles have decay rates (1 +- _NEAR_REAL_SPLIT) d (inside the decay
-    bound ``margin`` when the pair is): the response moves by O(_NEAR_REAL_SPLIT^2), and from there
-    the same block took 16 evaluations to a lower cost (1016 noise variances sigma^2 below the start,
-    against 420). ``identify`` asks for it
-    in the final refinement only: every refit of the order search and the delay steps split too sends
-    their chains elsewhere (random helmet 6, thesis length: n 16 and 6.4 s of CPU against n 14, 4.5 s).
-    """
-    poles = np.asarray(poles, dtype=complex)
-    decay = -np.log(np.maximum(np.abs(poles), 1e-300))
-    near = (poles.imag > 1e-12) & (np.abs(np.angle(poles)) < _NEAR_REAL * decay)
-    if not np.any(near):
-        return poles
-    keep = np.ones(poles.size, dtype=bool)
-    split = []
-    for p, d in zip(poles[near], decay[near]):
-        keep &= np.abs(poles - np.conj(p)) > 1e-15
-        faster = np.exp(-(1 + _NEAR_REAL_SPLIT) * d)
-        slower = np.exp(-max((1 - _NEAR_REAL_SPLIT) * d, margin))
-        split += [faster, slower]
-    keep &= ~near
-    return np.concatenate([poles[keep], np.array(split, dtype=complex)])
-
-
-def _params_to_poles(params: np.ndarray, pairs: int, margin: float = _STABLE) -> np.ndarray:
-    sigma, theta = params[0:2 * pairs:2], params[1:2 * pairs:2]
-    # The margin keeps |p| below 1, and within what the block resolves, however far sigma or xi run.
-    r = np.exp(-np.exp(np.minimum(sigma, 700.0)) - margin)
-    upper = r * np.exp(1j * theta)
-    return np.concatenate([upper, np.conj(upper), (np.exp(-margin) * np.tanh(params[2 * pairs:])).astype(complex)])
-
-
-def _pole_derivatives(params: np.ndarray, pairs: int, margin: float) -> np.ndarray:
-    """d pole / d parameter, one per parameter: -e^sigma p and j p for a pair's (sigma, theta)
-    (upper pole), exp(-margin) (1 - tanh^2 xi) for a real pole's xi."""
-    upper = _params_to_poles(params, pairs, margin)[:pairs]
-    out = np.empty(params.size, dtype=complex)
-    out[0:2 * pairs:2] = -np.exp(np.minimum(params[0:2 * pairs:2], 700.0)) * upper
-    out[1:2 * pairs:2] = 1j * upper
-    out[2 * pairs:] = np.exp(-margin) * (1 - np.tanh(params[2 * pairs:]) ** 2)
-    return out
+# Imported from here by the names they had before the parametrisation had a module of its own
+# (sysid.estimation.uncertainty); modal_parametrisation holds them.
+_poles_to_params, _params_to_poles = poles_to_params, params_to_poles
 
 
 @dataclass
@@ -247,233 +94,6 @@ def _stacked_real(basis: np.ndarray, factors: list[np.ndarray],
     return real, scale
 
 
-def _minimum_norm(q: np.ndarray, r: np.ndarray, rhs: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Minimum-norm least-squares solution of (Q R) x = rhs for a rank-deficient R, as ``np.linalg.lstsq``
-    on Q R (same singular values, same cut-off eps max(shape)), but by the SVD of the small R
-    (Q has orthonormal columns): on the tall matrix it took 37 ms a call (random helmet 0, thesis-length
-    session), on R well under 1 ms."""
-    return np.linalg.lstsq(r, q.T @ rhs, rcond=np.finfo(float).eps * max(shape))[0]
-
-
-def _shifted_cholesky_qr(matrix: np.ndarray, gram: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Thin (Q, R) of a full-rank ``matrix`` (m x n) by shifted CholeskyQR3, or None where a Cholesky step fails.
-
-    Fukaya, Kannan, Nakatsukasa, Yamamoto, Yanagisawa, "Shifted Cholesky QR for computing the QR
-    factorization of ill-conditioned matrices", SIAM J. Sci. Comput. 42(1), 2020: the Cholesky
-    factor R1 of the shifted Gram matrix X^T X + s I, s = 11 (m n + n (n + 1)) u ||X||_2^2 (u the unit
-    round-off), exists for any condition number up to about 1/u, and Q1 = X R1^-1 has a condition number
-    small enough for CholeskyQR2 (two more steps Q_i = Q_(i-1) R_i^-1, R_i the Cholesky factor of
-    Q_(i-1)^T Q_(i-1)) to bring it to orthogonality and a residual X - Q R of order u. Every step is a
-    Gram matrix or a triangular solve with many right-hand sides (level-3 BLAS). ``gram`` is X^T X.
-    """
-    m, n = matrix.shape
-    shift = 11.0 * (m * n + n * (n + 1)) * _UNIT_ROUNDOFF * np.linalg.eigvalsh(gram)[-1]
-    r, info = lapack.dpotrf(gram + shift * np.eye(n), lower=0, clean=1)
-    if info != 0:
-        return None
-    q = blas.dtrsm(1.0, r, matrix, side=1)
-    for _ in range(2):
-        step, info = lapack.dpotrf(q.T @ q, lower=0, clean=1)
-        if info != 0:
-            return None
-        q = blas.dtrsm(1.0, step, q, side=1, overwrite_b=1)
-        r = step @ r
-    return q, r
-
-
-def _condition_below(r: np.ndarray, limit: float) -> bool:
-    """Whether the 2-norm condition number of the upper triangular r is below ``limit``, as
-    ``np.linalg.cond(r) < limit`` but by bounds first: max|r_ii| / min|r_ii| <= cond_2(r) <= ||r||_F ||r^-1||_F
-    (the diagonal holds r's eigenvalues, and |lambda| lies between the extreme singular values), the
-    singular values only where the bounds straddle the limit. An SVD of a 46 x 46 factor took 340 us, the
-    bounds (one triangular inverse) 36 us; identify asks this of every regressor it factors (1015 on random
-    helmet 4, thesis length)."""
-    diagonal = np.abs(np.diag(r))
-    if not diagonal.size:
-        return True
-    if not np.all(np.isfinite(r)) or diagonal.min() == 0 or diagonal.max() >= limit * diagonal.min():
-        return False
-    inverse, info = lapack.dtrtri(r, lower=0)
-    if info == 0 and np.all(np.isfinite(inverse)) and np.linalg.norm(r) * np.linalg.norm(inverse) < limit:
-        return True
-    return bool(np.linalg.cond(r) < limit)
-
-
-class _Factor:
-    """Thin QR factors Phi = Q R of a tall regressor with unit-norm columns, and least squares by them.
-
-    When R is well conditioned, R is the Cholesky factor of the Gram matrix Phi^T Phi and Q stays
-    implicit, Phi R^-1 (products Q^T X = R^-T Phi^T X and Q Y = Phi R^-1 Y): a single-threaded
-    Householder QR of a 99600 x 34 block took 98 ms, its Gram matrix 8 ms (LAPACK's QR of a narrow
-    matrix runs at matrix-vector speed). The Gram matrix squares the condition number kappa,
-    losing about eps kappa^2 of orthogonality in Q: below kappa = _GRAM_CONDITION that is 1e-6 at
-    most, far below what the Jacobian needs, and the least-squares solution takes one step of
-    iterative refinement on the true residual (Bjorck, Numerical Methods for Least Squares
-    Problems, 1996, sec. 2.9).
-
-    Otherwise the columns are first split by a Cholesky factorisation of the Gram matrix with
-    diagonal pivoting (LAPACK dpstrf; Higham, "Accuracy and Stability of Numerical Algorithms",
-    2002, sec. 10.3): the columns kept, Phi_1, and those whose distance from the span of the kept
-    ones is below _DEPENDENT_DISTANCE. Coinciding poles make such columns (two real poles
-    at z = 0 or at the radius bound give identical columns; 304 of the 822 factorisations of random
-    helmet 1's thesis-length session), and most ill-conditioned regressors are of that kind.
-    - Some dropped: each is written Phi_2 = Phi_1 W on the kept columns (W by their own least
-      squares) and accepted when Phi_2 - Phi_1 W is below the minimum-norm cut-off of
-      ``np.linalg.lstsq`` (eps max(shape) ||Phi||_2 per column; a dropped column farther than that
-      is kept and the rest tried again): then the range of Phi is that of Phi_1, Q and R are Phi_1's
-      (implicit below _GRAM_CONDITION, else shifted CholeskyQR3) and the minimum-norm solution and
-      the pseudo-inverse follow from W in closed form (``solve``, ``pinv_t``). Householder gave the
-      same solution, but its R had a pivot of 1e-17 there, and R^-T in the Jacobian's second term
-      made the coinciding poles' Jacobian columns about 1e14 in size, which froze those poles.
-    - None dropped, or the dropped ones not accepted: Q and R of all columns by shifted
-      CholeskyQR3 (``_shifted_cholesky_qr``).
-    - Where a Cholesky step of that fails (rank deficient beyond what the split accepted): the
-      explicit Householder factors, with a minimum-norm solution when R is rank deficient.
-    Of 93 ill-conditioned regressors sampled from random helmet 1 (thesis length), 58 took the split
-    with implicit Q, 18 the split with shifted CholeskyQR3, 16 shifted CholeskyQR3 of all columns and
-    1 Householder: 0.43 s against Householder's 0.81 s for all 93 (one BLAS thread); a 99600 x 38
-    block of the final refinement with two coinciding poles 19 ms against 89 ms.
-    """
-
-    def __init__(self, matrix: np.ndarray):
-        self.matrix, self.q, self.keep, self.drop, self.w = matrix, None, None, None, None
-        gram = matrix.T @ matrix
-        try:
-            r = scipy.linalg.cholesky(gram, lower=False, check_finite=False)
-            implicit = _condition_below(r, _GRAM_CONDITION)
-        except np.linalg.LinAlgError:
-            implicit = False
-        if implicit:
-            self.r = r
-        elif not self._split(matrix, gram):
-            self.q, self.r = scipy.linalg.qr(matrix, mode="economic", check_finite=False)
-
-    def _split(self, matrix: np.ndarray, gram: np.ndarray) -> bool:
-        """The ill-conditioned routes of the class docstring; False where only Householder remains."""
-        m, n = matrix.shape
-        _, order, rank, _ = lapack.dpstrf(gram, tol=_DEPENDENT_DISTANCE**2 * max(np.max(np.diag(gram)), 1e-300))
-        order = order[:n] - 1
-        if rank < n:
-            cutoff = np.finfo(float).eps * max(m, n) * np.sqrt(np.linalg.eigvalsh(gram)[-1])
-            keep, drop = np.sort(order[:rank]), np.sort(order[rank:])
-            distance = self._drop(matrix, gram, keep, drop, cutoff)
-            if distance is not None and np.any(distance > cutoff) and np.any(distance <= cutoff):
-                # Columns nearer the others than the pivoting resolves but farther than the cut-off: kept
-                # (least squares resolves them), the rest dropped again on the wider set of kept columns.
-                keep, drop = np.sort(np.concatenate([keep, drop[distance > cutoff]])), drop[distance <= cutoff]
-                distance = self._drop(matrix, gram, keep, drop, cutoff)
-            if distance is not None and np.all(distance <= cutoff):
-                self._spread = scipy.linalg.cho_factor(np.eye(keep.size) + self.w @ self.w.T, check_finite=False)
-                return True
-            self.q, self.keep, self.drop, self.w = None, None, None, None
-        factors = _shifted_cholesky_qr(matrix, gram)
-        if factors is None:
-            return False
-        self.q, self.r = factors
-        return True
-
-    def _drop(self, matrix: np.ndarray, gram: np.ndarray, keep: np.ndarray, drop: np.ndarray,
-              cutoff: float) -> np.ndarray | None:
-        """Factor the ``keep`` columns (implicit below _GRAM_CONDITION, else shifted CholeskyQR3), write the
-        ``drop`` columns on them (W) and return each dropped column's distance from their span (None where
-        a Cholesky step fails); ``cutoff`` is the distance below which a column counts as dependent."""
-        dropped = matrix[:, drop]
-        sub_gram = gram[np.ix_(keep, keep)]
-        try:
-            r = scipy.linalg.cholesky(sub_gram, lower=False, check_finite=False)
-            implicit = _condition_below(r, _GRAM_CONDITION)
-        except np.linalg.LinAlgError:
-            implicit = False
-        self.keep = keep
-        if implicit:
-            self.q, self.r = None, r
-        else:
-            factors = _shifted_cholesky_qr(np.asfortranarray(matrix[:, keep]), sub_gram)
-            if factors is None:
-                return None
-            self.q, self.r = factors
-        if self.q is None:
-            # Phi_1^T Phi_2 is in the Gram matrix already; one step of iterative refinement where the
-            # distances are not yet below the cut-off (the implicit Q is accurate to eps kappa^2 only).
-            w = scipy.linalg.cho_solve((self.r, False), gram[np.ix_(keep, drop)], check_finite=False)
-        else:
-            w = self._least_squares(dropped)
-        left = dropped - self._kept_times(w)
-        distance = np.sqrt(np.einsum("ij,ij->j", left, left))
-        if self.q is None and np.max(distance) > cutoff:
-            w += self._least_squares(left)
-            left = dropped - self._kept_times(w)
-            distance = np.sqrt(np.einsum("ij,ij->j", left, left))
-        self.drop, self.w = drop, w
-        return distance
-
-    def _least_squares(self, rhs: np.ndarray) -> np.ndarray:
-        """R^-1 Q^T rhs: least squares on the factored columns (all, or the kept ones)."""
-        return scipy.linalg.solve_triangular(self.r, self.qt(rhs), check_finite=False)
-
-    @property
-    def columns(self) -> int:
-        """Columns of the regressor."""
-        return self.r.shape[0] if self.keep is None else self.keep.size + self.drop.size
-
-    def _kept_times(self, y: np.ndarray) -> np.ndarray:
-        """Phi_1 y: the kept columns (all when none are dropped) times y."""
-        if self.keep is None:
-            return self.matrix @ y
-        full = np.zeros((self.matrix.shape[1],) + y.shape[1:])
-        full[self.keep] = y
-        return self.matrix @ full
-
-    def qt(self, x: np.ndarray) -> np.ndarray:
-        """Q^T x."""
-        if self.q is not None:
-            return self.q.T @ x
-        product = self.matrix.T @ x
-        if self.keep is not None:
-            product = product[self.keep]
-        return scipy.linalg.solve_triangular(self.r, product, trans="T", check_finite=False)
-
-    def q_times(self, y: np.ndarray) -> np.ndarray:
-        """Q y."""
-        if self.q is not None:
-            return self.q @ y
-        return self._kept_times(scipy.linalg.solve_triangular(self.r, y, check_finite=False))
-
-    def pinv_t(self, g: np.ndarray) -> np.ndarray:
-        """c with Q c = (Phi^+)^T g (one row of g per regressor column): R^-T g at full rank. With
-        dropped columns Phi = Phi_1 [I W] (columns permuted), Phi^+ = [I; W^T] (I + W W^T)^-1 Phi_1^+, so
-        c = R^-T (I + W W^T)^-1 (g_kept + W g_dropped)."""
-        if self.keep is not None:
-            g = scipy.linalg.cho_solve(self._spread, g[self.keep] + self.w @ g[self.drop], check_finite=False)
-        return scipy.linalg.solve_triangular(self.r, g, trans="T", check_finite=False)
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """The least-squares solution x of Phi x = rhs (minimum-norm when Phi is rank deficient)."""
-        if self.keep is not None:
-            # Minimum norm over the kept and dropped coefficients: the pseudo-inverse of pinv_t's docstring.
-            x = self._least_squares(rhs)
-            if self.q is None:
-                x += self._least_squares(rhs - self._kept_times(x))
-            kept = scipy.linalg.cho_solve(self._spread, x, check_finite=False)
-            out = np.empty(self.columns)
-            out[self.keep], out[self.drop] = kept, self.w.T @ kept
-            return out
-        if self.q is None:
-            x = self._least_squares(rhs)
-            return x + self._least_squares(rhs - self.matrix @ x)
-        diagonal = np.abs(np.diag(self.r))
-        if diagonal.size and diagonal.min() > 1e-12 * diagonal.max():
-            return scipy.linalg.solve_triangular(self.r, self.q.T @ rhs, check_finite=False)
-        return _minimum_norm(self.q, self.r, rhs, self.matrix.shape)
-
-
-def _qr_solve(matrix: np.ndarray, rhs: np.ndarray) -> tuple[_Factor, np.ndarray]:
-    """(factors, x): the thin QR factors of ``matrix`` (``_Factor``) and the least-squares solution x of
-    matrix x = rhs by them (several times faster than the SVD-based lstsq)."""
-    factor = _Factor(matrix)
-    return factor, factor.solve(rhs)
-
-
 class _Problem:
     def __init__(self, data: BlockData, delay: int, feedthrough: bool, prefilter: np.ndarray | None = None):
         self.data, self.feedthrough = data, feedthrough
@@ -494,17 +114,8 @@ class _Problem:
 
     def linear(self, poles):
         A, C, real, scale, rhs = self.regression(poles)
-        scaled = _qr_solve(real, rhs)[1]
+        scaled = qr_solve(real, rhs)[1]
         return A, C, scaled / scale, rhs - real @ scaled
-
-
-def _block_basis(pole: complex, z: np.ndarray) -> np.ndarray:
-    """``modal_basis`` columns of one block: a pair a +- jb with C = [1, 0], or a real pole with C = [1]."""
-    if pole.imag == 0:
-        return (1.0 / (z - pole.real))[:, None]
-    a, b = pole.real, pole.imag
-    den = (z - a) ** 2 + b**2
-    return np.stack([(z - a) / den, b / den], axis=1)
 
 
 class _Projection:
@@ -542,9 +153,9 @@ class _Projection:
             return
         if self._x is not None:
             self._previous = tuple(getattr(self, name) for name in self._STATE)
-        poles = _params_to_poles(x, self.pairs, self.margin)
+        poles = params_to_poles(x, self.pairs, self.margin)
         _, _, real, scale, rhs = self.problem.regression(poles)
-        factor, scaled = _qr_solve(real, rhs)
+        factor, scaled = qr_solve(real, rhs)
         self._x, self._poles, self._factor, self._scale, self._theta = x.copy(), poles, factor, scale, scaled / scale
         self._residual = rhs - real @ scaled
 
@@ -593,7 +204,7 @@ class _Projection:
         is_pair = j < 2 * pairs
         zc = z[:, None]
         pc, rc = np.flatnonzero(is_pair), np.flatnonzero(~is_pair)
-        dp = _pole_derivatives(x, pairs, self.margin)
+        dp = pole_derivatives(x, pairs, self.margin)
         upper = self._poles[:pairs]
         reals = self._poles[2 * pairs:].real
         # Coefficients of each block's columns: a pair's first column (g + h)/2 carries
@@ -696,7 +307,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
         raise IdentificationError("output-error refinement needs a stable starting model")
     problem = _Problem(data, delay, feedthrough, prefilter)
     margin = decay_bound(data)
-    params, pairs = _poles_to_params(split_near_real_pairs(poles, margin) if split_near_real else poles, margin)
+    params, pairs = poles_to_params(split_near_real_pairs(poles, margin) if split_near_real else poles, margin)
     projection = _Projection(problem, pairs)
 
     # MINPACK's lmder (Levenberg-Marquardt, scaled by the Jacobian's column norms) through ``leastsq``, as
@@ -709,7 +320,7 @@ def refine_output_error(A, B, C, D, data: BlockData, delay: int = 0, feedthrough
             ftol=1.0 / start.size if noise_tolerance else 1e-8, xtol=1e-8, gtol=1e-8)
     # r = exp(-exp(sigma)) rounds to 1 in floating point when sigma runs far negative: such a
     # result is not stable and the starting poles are kept instead.
-    stable = np.all(np.abs(_params_to_poles(solution, pairs, margin)) < 1.0)
+    stable = np.all(np.abs(params_to_poles(solution, pairs, margin)) < 1.0)
     x = solution if stable and np.sum(info["fvec"]**2) <= np.sum(start**2) else params
     with _BLAS.limit(limits=1, user_api="blas"):
         A_new, C_new, theta, final = projection.linear(x)
@@ -750,7 +361,7 @@ def added_pole_costs(A, added: list[np.ndarray], data: BlockData, feedthrough: b
     costs = []
     with _BLAS.limit(limits=1, user_api="blas"):
         _, _, real, _, rhs = problem.regression(poles)
-        factor, scaled = _qr_solve(real, rhs)
+        factor, scaled = qr_solve(real, rhs)
         residual = rhs - real @ scaled
         # Chunks of sets bound the memory of the stacked columns on long blocks.
         for start in range(0, len(added), 16):

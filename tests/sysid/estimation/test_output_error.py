@@ -6,7 +6,7 @@ import pytest
 from sysid.core import lti
 from sysid.core.errors import IdentificationError
 from sysid.core.plants import appendix_a_model
-from sysid.estimation import output_error
+from sysid.estimation import modal_parametrisation, output_error
 from sysid.estimation.output_error import block_data, refine_output_error
 from sysid.io.recordings import Recording
 
@@ -72,7 +72,7 @@ def test_jacobian_matches_central_differences_in_and_out_of_band(rng):
     upper = 0.99 * np.exp(1j * np.array([0.01, 0.6, 1.5, 2.9]))
     poles = np.concatenate([upper, np.conj(upper), [0.5, -0.3]])
     problem = output_error._Problem(data, 0, False)
-    x, pairs = output_error._poles_to_params(poles, output_error.decay_bound(data))
+    x, pairs = modal_parametrisation.poles_to_params(poles, modal_parametrisation.decay_bound(data))
     projection = output_error._Projection(problem, pairs)
     jacobian = projection.jacobian(x)
     for k in range(x.size):
@@ -82,15 +82,6 @@ def test_jacobian_matches_central_differences_in_and_out_of_band(rng):
         numeric = (projection.residual(x + step) - projection.residual(x - step)) / (2 * h)
         assert np.linalg.norm(jacobian[:, k] - numeric) <= 1e-3 * np.linalg.norm(numeric)
 
-
-def test_modal_basis_is_the_resolvent_for_any_output_row(rng):
-    # Written column by column in place: still C (zI - A)^-1 e_j, also for an output row other than [1 0 | 1].
-    upper = 0.97 * np.exp(1j * np.array([0.2, 1.1]))
-    A = lti.real_block_diagonal(np.concatenate([upper, np.conj(upper), [0.4]]))
-    C = rng.standard_normal((1, 5))
-    z = np.exp(1j * np.linspace(0.01, 3.0, 7))
-    expected = np.array([C @ np.linalg.inv(zk * np.eye(5) - A) for zk in z])[:, 0, :]
-    np.testing.assert_allclose(output_error.modal_basis(A, C, z), expected, rtol=1e-12, atol=0)
 
 
 def test_the_jacobians_in_place_passes_give_the_bits_of_the_plain_expressions(rng):
@@ -102,18 +93,6 @@ def test_the_jacobians_in_place_passes_give_the_bits_of_the_plain_expressions(rn
     assert np.array_equal(output_error._inverse_square(z, poles), (1.0 / (z - poles)) ** 2)
     assert np.array_equal(output_error._linear_in_theta(u, z, on_u, on_z), u * on_u + z * on_z)
 
-
-def test_the_condition_test_by_bounds_decides_as_the_singular_values(rng):
-    # Triangular factors of condition numbers 1 to 1e10 around the limit, singular ones and an empty one.
-    for exponent in np.linspace(0, 10, 41):
-        q, _ = np.linalg.qr(rng.standard_normal((12, 12)))
-        r = np.linalg.qr(q * np.logspace(0, -exponent, 12))[1]
-        for limit in (1e3, 1e5):
-            assert output_error._condition_below(r, limit) == (np.linalg.cond(r) < limit)
-    singular = np.triu(rng.standard_normal((4, 4)))
-    singular[2, 2] = 0.0
-    assert not output_error._condition_below(singular, 1e5)
-    assert output_error._condition_below(np.zeros((0, 0)), 1e5)
 
 
 def test_spare_poles_stay_within_what_the_block_resolves(rng):
@@ -128,7 +107,7 @@ def test_spare_poles_stay_within_what_the_block_resolves(rng):
                               data, max_iterations=20)
     found = np.linalg.eigvals(fit.A)
     decay = -np.log(np.maximum(np.abs(found), 1e-300))
-    assert np.all(decay >= output_error.decay_bound(data) * (1 - 1e-6))
+    assert np.all(decay >= modal_parametrisation.decay_bound(data) * (1 - 1e-6))
     # With the bound at 1 - 1e-9 everywhere (before), a spare pair ran to |p| = 1 - 1e-9 at 13.4 kHz and two real
     # poles to z = 1 - 1e-9 on this block.
     assert np.max(np.abs(found)) < 1 - 1e-5
@@ -161,64 +140,7 @@ def test_added_pole_costs_equal_the_fixed_pole_cost_of_the_joined_poles(rng):
         assert cost == pytest.approx(output_error.linear_cost(joined, data), rel=1e-8)
 
 
-def test_least_squares_through_the_gram_matrix_or_householder_equal_lstsq(rng):
-    # Well conditioned: the Cholesky factor of the Gram matrix (Q implicit); nearly coinciding
-    # columns (condition 1e8): shifted CholeskyQR3 (Q explicit, no column dropped). Both give
-    # lstsq's solution, projector and pseudo-inverse.
-    well = rng.standard_normal((400, 6))
-    ill = well.copy()
-    ill[:, 5] = ill[:, 4] + 1e-8 * rng.standard_normal(400)
-    rhs = rng.standard_normal(400)
-    g = rng.standard_normal((6, 3))
-    for matrix, implicit in ((well, True), (ill, False)):
-        matrix = matrix / np.linalg.norm(matrix, axis=0)
-        factor, x = output_error._qr_solve(np.asfortranarray(matrix), rhs)
-        assert (factor.q is None) == implicit
-        assert factor.keep is None
-        expected = np.linalg.lstsq(matrix, rhs, rcond=None)[0]
-        np.testing.assert_allclose(matrix @ x, matrix @ expected, atol=1e-7)
-        np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ expected, atol=1e-7)
-    factor = output_error._Factor(np.asfortranarray(well / np.linalg.norm(well, axis=0)))
-    np.testing.assert_allclose(factor.q_times(factor.pinv_t(g)), np.linalg.pinv(well / np.linalg.norm(well, axis=0)).T @ g,
-                               atol=1e-10)
 
-
-@pytest.mark.parametrize("spread", [1.0, 1e-5])
-def test_coinciding_columns_are_dropped_with_the_minimum_norm_solution_of_lstsq(rng, spread):
-    # Coinciding poles give identical regressor columns (two real poles at z = 0), a pole pair at
-    # the origin a zero column. The dependent columns are dropped and written on the kept ones;
-    # the solution is lstsq's minimum-norm one, the projector and the pseudo-inverse are lstsq's.
-    # spread 1e-5 leaves the kept columns ill conditioned (shifted CholeskyQR3 on them).
-    base = rng.standard_normal((600, 5))
-    base[:, 4] = base[:, 3] + spread * rng.standard_normal(600)
-    matrix = np.column_stack([base, base[:, 1], np.zeros(600), base[:, 2] * 1.0])
-    scale = np.linalg.norm(matrix, axis=0)
-    matrix = np.asfortranarray(matrix / np.where(scale == 0, 1.0, scale))
-    rhs, g = rng.standard_normal(600), rng.standard_normal((8, 3))
-    factor, x = output_error._qr_solve(matrix, rhs)
-    dropped = set(factor.drop.tolist())
-    assert len(dropped) == 3 and 6 in dropped and dropped & {1, 5} and dropped & {2, 7}
-    assert (factor.q is None) == (spread == 1.0)
-    cutoff = np.finfo(float).eps * 600
-    expected = np.linalg.lstsq(matrix, rhs, rcond=cutoff)[0]
-    assert np.linalg.norm(x - expected) <= 1e-10 * np.linalg.norm(expected)
-    pinv = np.linalg.pinv(matrix, rcond=cutoff)
-    np.testing.assert_allclose(factor.q_times(factor.qt(rhs)), matrix @ pinv @ rhs, atol=1e-9)
-    np.testing.assert_allclose(factor.q_times(factor.pinv_t(g)), pinv.T @ g, atol=1e-7)
-
-
-def test_a_nearly_real_pair_is_split_into_two_real_poles():
-    d = 0.015
-    near = np.exp(-d) * np.exp(1e-7j)
-    pair = 0.9 * np.exp(0.2j)
-    poles = np.array([near, np.conj(near), pair, np.conj(pair), 0.5])
-    split = output_error.split_near_real_pairs(poles)
-    assert split.size == poles.size
-    np.testing.assert_allclose(np.sort(split[np.abs(split.imag) == 0].real),
-                               np.sort([0.5, np.exp(-1.1 * d), np.exp(-0.9 * d)]))
-    assert np.count_nonzero(np.isin(split, [pair, np.conj(pair)])) == 2
-    # Nothing nearly real: returned as given.
-    np.testing.assert_array_equal(output_error.split_near_real_pairs(poles[2:]), poles[2:])
 
 
 def test_a_pair_run_to_the_real_axis_refines_to_the_two_real_poles_it_imitated(rng):
@@ -251,15 +173,15 @@ def test_minpack_takes_the_iterates_of_least_squares_lm(rng):
     n = start.shape[0]
     fit = refine_output_error(start, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), data, max_iterations=15,
                               noise_tolerance=True)
-    margin = output_error.decay_bound(data)
-    params, pairs = output_error._poles_to_params(np.linalg.eigvals(start), margin)
+    margin = modal_parametrisation.decay_bound(data)
+    params, pairs = modal_parametrisation.poles_to_params(np.linalg.eigvals(start), margin)
     projection = output_error._Projection(output_error._Problem(data, 0, False), pairs)
     reference = scipy.optimize.least_squares(projection.residual, params, jac=projection.jacobian, method="lm",
                                              x_scale="jac", max_nfev=15, ftol=1.0 / (2 * data.z.size))
     assert fit.iterations == reference.nfev
     assert fit.cost_after == pytest.approx(float(np.sum(reference.fun**2)), rel=1e-12)
     np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(fit.A)),
-                               np.sort_complex(output_error._params_to_poles(reference.x, pairs, margin)), rtol=1e-10)
+                               np.sort_complex(modal_parametrisation.params_to_poles(reference.x, pairs, margin)), rtol=1e-10)
 
 
 def test_a_trial_point_that_is_not_finite_gets_a_residual_the_optimiser_rejects(rng):
@@ -267,7 +189,7 @@ def test_a_trial_point_that_is_not_finite_gets_a_residual_the_optimiser_rejects(
     # Jacobian: the residual there is finite and far above the last one, and the last point's state stands.
     data = block_data(_noise_recording(appendix_a_model("ff"), rng, seconds=0.5, output_noise=1e-3), max_seconds=None)
     poles = np.concatenate([0.99 * np.exp(1j * np.array([0.01, 0.6])), 0.99 * np.exp(-1j * np.array([0.01, 0.6])), [0.5]])
-    x, pairs = output_error._poles_to_params(poles, output_error.decay_bound(data))
+    x, pairs = modal_parametrisation.poles_to_params(poles, modal_parametrisation.decay_bound(data))
     projection = output_error._Projection(output_error._Problem(data, 0, False), pairs)
     before = projection.residual(x)
     broken = projection.residual(np.full_like(x, np.nan))
