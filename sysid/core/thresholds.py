@@ -53,6 +53,43 @@ LINE_RATIO = 40.0
 # ---------------------------------------------------------------------------------------------------------------------
 # The delay (sysid.estimation.delay: the one place it is decided).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["ONSET_COHERENCE", "ONSET_PEAK_FRACTION", "ONSET_NOISE_MULTIPLE", "DELAY_WINDOW", "DELAY_WIDEST",
+            "DELAY_TOLERANCE", "DELAY_DIP", "DELAY_REFIT_ITERATIONS", "WALK_SPAN", "WALK_CLEAR", "WALK_STEP",
+            "DELAY_TRIES", "FREED_ORDERS", "SHORTER_BY", "MAX_EXTRA_DELAY"]
+
+# The onset (``estimate_latency``): the band ends where the 9-bin averaged squared coherence falls to
+# ONSET_COHERENCE; the onset is the first sample above ONSET_PEAK_FRACTION of the peak and ONSET_NOISE_MULTIPLE
+# times the RMS of the response at negative times.
+ONSET_COHERENCE = 0.5
+ONSET_PEAK_FRACTION = 0.1
+ONSET_NOISE_MULTIPLE = 6.0
+# ``refine_delay``: the fixed-pole costs' first window, DELAY_WINDOW samples either side of the onset's delay, grown
+# by as much at a time up to DELAY_WIDEST; a delay is within the tolerance when its cost is within DELAY_TOLERANCE
+# output-noise variances sigma^2 = V / (2 M) (M bins) of the smallest. A cost dip past the answer is refitted when
+# within DELAY_DIP of the smallest cost; each refit runs DELAY_REFIT_ITERATIONS output-error iterations (a start near
+# the answer converges in a few).
+DELAY_WINDOW = 4
+DELAY_WIDEST = 12
+DELAY_TOLERANCE = 40.0
+DELAY_DIP = 0.10
+DELAY_REFIT_ITERATIONS = 10
+# ``walk_delay``: samples it may move from refine_delay's answer (further when the band's kernel lead is longer);
+# it walks up until a cost rises WALK_CLEAR sigma^2 above the smallest (past the true delay the cost rises by 3 %
+# to 20x a sample where the response's first sample is not small, thousands of sigma^2), and refits again from the
+# best core's poles the delays within it; it decides up from the smallest cost through costs within WALK_STEP
+# sigma^2 of it (``_decided``).
+WALK_SPAN = 12
+WALK_CLEAR = 20.0
+WALK_STEP = 2.0
+# ``moved_delay``, after identify's order search: delays walked to tried at most on the sweeps, longest first;
+# lower orders refitted behind a moved delay (their poles need not imitate it).
+DELAY_TRIES = 3
+FREED_ORDERS = 2
+# ``shorter_delays``, after a data correction's refit: samples the onset may read long (``refine_delay``'s window
+# below the onset), the delays the core is identified anew behind.
+SHORTER_BY = 4
+# The delay detector's fixed-pole scan: total delays up to the model's and this many more.
+MAX_EXTRA_DELAY = 120
 
 
 
