@@ -47,6 +47,11 @@ LINE_RATIO = 40.0
 # ---------------------------------------------------------------------------------------------------------------------
 # Identification: the order search, the settling of a pick, the reduction (sysid.identify, sysid.estimation).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["SETTLE_DROPS"]
+
+# Out-of-band poles dropped at most from a pick whose simulation disagrees with the sweeps' spectra
+# (``sysid.identify``'s settling of the order search's pick).
+SETTLE_DROPS = 4
 
 
 

@@ -48,7 +48,7 @@ from .output_error import (BlockData, added_pole_costs, linear_cost, radius_boun
                            residual_spectrum)
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
 
-__all__ = ["OrderCandidate", "search_orders", "distinct_start", "START_GAMMAS"]
+__all__ = ["OrderCandidate", "search_orders", "distinct_start", "without_freed_pole", "START_GAMMAS"]
 
 # Smoothing widths whose subspace models start every order, besides the grid's best of that order.
 START_GAMMAS = (30, 100, 300)
@@ -81,7 +81,11 @@ _NOISE_SIGMAS = 3.0
 
 @dataclass
 class OrderCandidate:
-    """The best refined model of one order, from which start, and its validation rms (FS)."""
+    """The best refined model of one order, from which start, and its validation rms (FS).
+
+    ``gamma``: the smoothing width of the ``grid gamma=G`` start the candidate descends from (refitted,
+    moved behind another delay or with a pole dropped), None for the other starts.
+    """
 
     order: int
     start: str
@@ -91,6 +95,7 @@ class OrderCandidate:
     C: np.ndarray
     D: np.ndarray
     reflected: int = 0
+    gamma: int | None = None
 
     def to_dict(self) -> dict:
         return {"order": self.order, "start": self.start, "refined_rms": self.rms, "reflected_poles": self.reflected}
@@ -194,6 +199,25 @@ def distinct_start(poles: np.ndarray, block: BlockData, feedthrough: bool, added
     return np.array(placed)
 
 
+def without_freed_pole(poles: np.ndarray, band: tuple[float, float], fs: float) -> np.ndarray | None:
+    """The poles without the one (or conjugate pair) nearest the unit circle among those whose frequency
+    angle(p) fs / 2 pi (Hz) lies outside ``band``; None when every pole is in band.
+
+    A fit on the band's bins leaves spare poles free outside it, and one run toward z = 1 or z = -1 rings in a
+    simulation the band's bins do not show: identify's settling of a pick (``sysid.identify``) and its moved-delay
+    trials (``sysid.estimation.delay.trials``) drop it and refit the rest.
+    """
+    frequency = np.abs(np.angle(poles)) * fs / (2 * np.pi)
+    outside = np.flatnonzero((frequency < band[0]) | (frequency > band[1]))
+    if outside.size == 0 or poles.size < 2:
+        return None
+    worst = poles[outside[np.argmax(np.abs(poles[outside]))]]
+    keep = np.abs(poles - worst) > 1e-12
+    if abs(worst.imag) > 0:
+        keep &= np.abs(poles - np.conj(worst)) > 1e-12
+    return poles[keep]
+
+
 def _pair(omega: float, q: float) -> np.ndarray:
     """A conjugate pair at ``omega`` (rad/sample) with quality factor ``q``: r e^{+-j omega}, r = e^{-omega / 2q}."""
     p = np.exp(-omega / (2 * q)) * np.exp(1j * omega)
@@ -266,7 +290,7 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
     best_so_far, since = np.inf, 0
     inserted = None  # the record after the last mode insertion
     for k, n in enumerate(orders):
-        starts: list[tuple[str, np.ndarray, int]] = []
+        starts: list[tuple[str, np.ndarray, int, int | None]] = []
         gammas = [grid_gammas[n]] if n in grid_gammas else []
         gammas += [g for g in START_GAMMAS if g in decompositions and g not in gammas]
         for gamma in gammas:
@@ -275,29 +299,29 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
                 continue
             A, _ = decomposition.observability(n)
             poles, moved = reflect_unstable(np.linalg.eigvals(A))
-            starts.append((f"grid gamma={gamma}", distinct_start(poles, block, feedthrough), moved))
+            starts.append((f"grid gamma={gamma}", distinct_start(poles, block, feedthrough), moved, gamma))
         poles, moved = reflect_unstable(raw[n])
-        starts.append(("raw subspace", distinct_start(poles, block, feedthrough), moved))
+        starts.append(("raw subspace", distinct_start(poles, block, feedthrough), moved, None))
         if n - 1 in best:
             previous = np.linalg.eigvals(best[n - 1].A)
-            starts.append((f"order {n - 1} + real pole", distinct_start(previous, block, feedthrough, added=1), 0))
+            starts.append((f"order {n - 1} + real pole", distinct_start(previous, block, feedthrough, added=1), 0, None))
         if n - 2 in best:
             previous = np.linalg.eigvals(best[n - 2].A)
             starts.append((f"order {n - 2} + mode", distinct_start(np.concatenate(
-                [previous, _residual_mode(previous, block, feedthrough)]), block, feedthrough), 0))
+                [previous, _residual_mode(previous, block, feedthrough)]), block, feedthrough), 0, None))
         screened = []
-        for label, poles, moved in starts:
+        for label, poles, moved, gamma in starts:
             A = lti.real_block_diagonal(poles)
-            screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved))
+            screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved, gamma))
         screened.sort(key=lambda item: item[0])
         # A start whose fixed-pole cost is far above the best one's rarely refines past it.
         chosen = [item for item in screened[:_REFINED_STARTS] if item[0] <= _SCREEN_RATIO * screened[0][0]]
-        for _, label, A, moved in chosen:
+        for _, label, A, moved, gamma in chosen:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
                                       feedthrough=feedthrough, max_iterations=max_iterations, noise_tolerance=True)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
             if n not in best or rms < best[n].rms:
-                best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved)
+                best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved, gamma)
         if progress:
             progress(k + 1, len(orders), "order search")
         record = min(c.rms for c in best.values())

@@ -17,6 +17,8 @@ The rule, in the order the pipeline applies it:
 3. ``walk``: read short or right, the core refitted one sample of delay at a time settles it
    (``walk_delay``): up from the smallest refitted cost through costs within the noise of it.
    ``decide_delay`` runs 2 and 3: the one decision.
+4. ``trials``: the sweeps have the last word. ``identify`` keeps a delay its pick's core decides
+   only when a core refitted behind it validates as well as the pick (``moved_delay``).
 
 Short is the safe side throughout: a core behind a delay a sample too short imitates the
 sample nearly free, one behind a delay too long cannot be causal. The tunables are in
@@ -27,9 +29,11 @@ from __future__ import annotations
 
 from . import costs as _costs
 from . import onset as _onset
+from . import trials as _trials
 from . import walk as _walk
 from .costs import *  # noqa: F401,F403
 from .onset import *  # noqa: F401,F403
+from .trials import *  # noqa: F401,F403
 from .walk import *  # noqa: F401,F403
 
-__all__ = [*_onset.__all__, *_costs.__all__, *_walk.__all__]
+__all__ = [*_onset.__all__, *_costs.__all__, *_walk.__all__, *_trials.__all__]

@@ -63,6 +63,11 @@ class LatencyEstimate:
     def centimetres(self) -> float:
         return delay_centimetres(self.samples, self.fs)
 
+    @property
+    def lead(self) -> int:
+        """The band-limited kernel's lead (samples), fs / (2 f_top) rounded up: how far short the onset may read."""
+        return int(np.ceil(self.fs / (2 * self.top_hz)))
+
     def to_dict(self) -> dict:
         method = "onset of the band-limited H1 impulse response"
         if self.refined_by is not None:
