@@ -119,3 +119,20 @@ MAX_EXTRA_DELAY = 120
 # ---------------------------------------------------------------------------------------------------------------------
 # Refinement: the structures and data corrections refine adds (sysid.refits).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["WARM_ENOUGH", "EIV_MIN_ATTENUATION", "CLIPPING_PASSES", "CLOCK_AR_ORDER", "CLOCK_AR_FLOOR", "CLOCK_PASSES"]
+
+# A warm start within this factor of the noise floor makes the re-identification needless. Stricter
+# than AT_FLOOR: a warm start "at the floor" by AT_FLOOR may still lie 20 % above what a fresh fit
+# reaches (the README's delay-and-hum example: 1.15x warm, 1.01x re-identified).
+WARM_ENOUGH = 1.05
+# ``add_input_noise``: the H1 attenuation 1 - P_n / S_uu is not divided out below this (bins where the input
+# is mostly its own noise carry next to nothing of the path; dividing by a tiny factor would only amplify noise).
+EIV_MIN_ATTENUATION = 0.2
+# Passes of the refit on data with excluded stretches: each fills them with the last model's prediction.
+CLIPPING_PASSES = 3
+# Order of the residual's AR model that whitens the clock ratio's regression (``clock_residual``), and its white
+# floor (diagonal loading) relative to the residual's power.
+CLOCK_AR_ORDER = 32
+CLOCK_AR_FLOOR = 0.01
+# Passes of the clock ratio's refinement after a clock correction's refit (``refined_clock``).
+CLOCK_PASSES = 2
