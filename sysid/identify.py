@@ -42,10 +42,11 @@ from threadpoolctl import threadpool_limits
 from .core import lti
 from .core.errors import IdentificationError
 from .core.model import PATHS, Model
-from .core.thresholds import IDENTIFICATION_BAND, SETTLE_DROPS, TRANSIENT_S
+from .core.thresholds import (DEFAULT_GAMMAS, DEFAULT_ORDERS, IDENTIFICATION_BAND, MIN_GAIN, ORDER_AT_FLOOR,
+                              SETTLE_DROPS, START_GAMMAS, TRANSIENT_S)
 from .estimation.delay import LatencyEstimate, TrialOptions, compensate_delay, estimate_latency, moved_delay
-from .estimation.grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .estimation.order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms, without_freed_pole
+from .estimation.grid import GridResult, grid_search
+from .estimation.order_search import OrderCandidate, search_orders, sweep_rms, without_freed_pole
 from .estimation.output_error import block_data, refine_output_error
 from .estimation.reduction import Reduced, without_degenerate_states
 from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
@@ -79,8 +80,8 @@ class IdentificationOptions:
     # The order search tries every order up to max_order unless the validation rms reaches
     # at_floor times the noise floor first; it picks the lowest order within min_gain of the best.
     max_order: int = 30
-    at_floor: float = 1.02
-    min_gain: float = 0.03
+    at_floor: float = ORDER_AT_FLOOR
+    min_gain: float = MIN_GAIN
 
 
 @dataclass

@@ -15,6 +15,7 @@ import scipy.signal
 
 from sysid.core import lti
 from sysid.core.model import MAX_COEFFICIENT, Model
+from sysid.core.thresholds import START_REAL_POLES, START_SEPARATION
 from sysid.estimation import order_search
 from sysid.estimation.order_search import (OrderCandidate, _insert_modes, _pair, block_at_noise, distinct_start,
                                            sweep_rms, without_freed_pole)
@@ -173,11 +174,11 @@ def test_coinciding_and_bound_starting_poles_are_replaced_by_distinct_real_poles
     degenerate = np.concatenate([_PAIR_500, [0.5, 0.5, 0.0, 0.0, bound]])
     start = distinct_start(degenerate, block, feedthrough=False, added=1)
     assert start.size == degenerate.size + 1
-    assert _min_distance(start) >= order_search._SEPARATION
+    assert _min_distance(start) >= START_SEPARATION
     assert not at_radius_bound(start, block)
     # The pair and the first of each coinciding group stay; the replacements are real poles.
     np.testing.assert_array_equal(start[:4], np.concatenate([_PAIR_500, [0.5, 0.0]]))
-    assert np.all(start[4:].imag == 0) and set(start[4:].real) <= set(order_search._REAL_POLES)
+    assert np.all(start[4:].imag == 0) and set(start[4:].real) <= set(START_REAL_POLES)
 
 
 def test_a_start_without_degenerate_poles_is_kept_and_takes_the_added_pole_at_one_half():
@@ -192,7 +193,7 @@ def test_a_model_holding_one_half_gets_another_real_pole_and_refines_to_the_trut
     # pole 0.5: the new pole goes elsewhere, and the refinement reaches the true poles' cost.
     A_true, block = _real_pole_block()
     start = distinct_start(np.concatenate([_PAIR_500, [0.5]]), block, feedthrough=False, added=1)
-    assert start.size == 4 and _min_distance(start) >= order_search._SEPARATION
+    assert start.size == 4 and _min_distance(start) >= START_SEPARATION
     fit = refine_output_error(lti.real_block_diagonal(start), np.zeros((4, 1)), np.zeros((1, 4)), np.zeros((1, 1)),
                               block, max_iterations=20, noise_tolerance=True)
     assert fit.cost_after <= 1.001 * linear_cost(A_true, block)
