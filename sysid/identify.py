@@ -2,8 +2,8 @@
 
 1. Spectra of the noise recording after its transient (``spectra``: h1 or seed-average).
 2. The pure delay (latency) from the onset of the band-limited impulse response
-   (``latency``); everything after this works on delay-compensated data (the ear
-   signal advanced by the delay), and the delay goes into the model's ``delay``.
+   (``sysid.estimation.delay.estimate_latency``); everything after this works on delay-compensated
+   data (the ear signal advanced by the delay), and the delay goes into the model's ``delay``.
 3. The seed's grid over smoothing width gamma and order n of the frequency-domain
    subspace method, ranked by the true validation rms on both sweeps (``grid``).
 4. Beyond the seed (design.md, identification steps 5 and 6): an order search with
@@ -15,11 +15,11 @@
    disagree with the sweeps' spectra loses its out-of-band poles run to the unit
    circle (``_settle``).
 5. The onset's delay errs short by the smoothing kernel's lead (and long on a slowly
-   rising response); the picked model's poles say by how much (``latency.refine_delay``),
-   read short, its core refitted one sample at a time settles it (``latency.walk_delay``:
-   the largest delay whose refit costs within the noise of the best), and the samples its
+   rising response); the picked model's core decides by how much (``sysid.estimation.delay``:
+   fixed-pole costs, then its core refitted one sample at a time), and the samples its
    core spent imitating delay move into the delay line (or back out of it) before the
-   final refinement.
+   final refinement when a core behind the new delay validates as well
+   (``sysid.estimation.delay.moved_delay``).
 6. States the data did not ask for leave (``reduction``): poles the final refinement parked at
    the block's radius bound, states no balanced realisation of the full order holds, and the
    balanced tail whose Hankel singular values sum to at most 1e-3 of the largest, each kept
@@ -42,28 +42,22 @@ from threadpoolctl import threadpool_limits
 from .core import lti
 from .core.errors import IdentificationError
 from .core.model import PATHS, Model
-from .core.thresholds import IDENTIFICATION_BAND, TRANSIENT_S
-from .estimation.delay import LatencyEstimate, compensate_delay, decide_delay, estimate_latency
-from .estimation.grid import DEFAULT_GAMMAS, DEFAULT_ORDERS, GridResult, grid_search
-from .estimation.order_search import START_GAMMAS, OrderCandidate, search_orders, sweep_rms
-from .estimation.output_error import at_radius_bound, block_data, refine_output_error
-from .estimation.reduction import without_degenerate_states
+from .core.thresholds import (DEFAULT_GAMMAS, DEFAULT_ORDERS, IDENTIFICATION_BAND, MIN_GAIN, ORDER_AT_FLOOR,
+                              SETTLE_DROPS, START_GAMMAS, TRANSIENT_S)
+from .estimation.delay import LatencyEstimate, TrialOptions, compensate_delay, estimate_latency, moved_delay
+from .estimation.grid import GridResult, grid_search
+from .estimation.order_search import OrderCandidate, search_orders, sweep_rms, without_freed_pole
+from .estimation.output_error import block_data, refine_output_error
+from .estimation.reduction import Reduced, without_degenerate_states
 from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
 from .estimation.subspace import SubspaceDecomposition
 from .estimation.uncertainty import frequency_response_band
 from .io.lines import undriven_lines, without_lines
 from .io.recordings import Recording, RecordingFile, check_same_rate
-from .validation.sweeps import (VALIDATION_BAND, check_repeats, noise_floor, repeat_lag, simulated_rms, sweep_spectrum,
-                                without_repeat_lines)
+from .validation.sweeps import (VALIDATION_BAND, SweepSpectrum, check_repeats, noise_floor, repeat_lag, simulated_rms,
+                                sweep_spectrum, without_repeat_lines)
 
 __all__ = ["IdentificationOptions", "Identification", "identify"]
-
-# Lower orders refitted behind a delay moved by latency.refine_delay (their poles need not imitate it).
-_FREED_ORDERS = 2
-# Out-of-band poles dropped at most from a pick whose simulation disagrees with the sweeps' spectra (_settle).
-_SETTLE_DROPS = 4
-# Delays walked to (latency.walk_delay) tried at most on the sweeps, longest first.
-_DELAY_TRIES = 3
 
 
 @dataclass(frozen=True)
@@ -86,8 +80,8 @@ class IdentificationOptions:
     # The order search tries every order up to max_order unless the validation rms reaches
     # at_floor times the noise floor first; it picks the lowest order within min_gain of the best.
     max_order: int = 30
-    at_floor: float = 1.02
-    min_gain: float = 0.03
+    at_floor: float = ORDER_AT_FLOOR
+    min_gain: float = MIN_GAIN
 
 
 @dataclass
@@ -195,13 +189,13 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     result_model, refined_rms, scan = seed_model, None, []
     if options.refine:
         t0 = time.perf_counter()
-        # The band-limited kernel's lead (samples): how far short the onset may have read (latency module docstring).
-        lead = int(np.ceil(fs / (2 * latency.top_hz))) if latency else 0
-        result_model, refined_rms, scan, extra = _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor,
-                                                         options, provenance, progress, lead)
+        # The band-limited kernel's lead (samples): how far short the onset may have read.
+        lead = latency.lead if latency else 0
+        result_model, refined_rms, scan, extra = _refine(_Behind(body, sweeps, sweep_spectra, delay, path, options),
+                                                         spectra, grid, floor, provenance, progress, lead)
         seconds["refinement"] = time.perf_counter() - t0
         if extra is not None and refined_rms < seed_rms:
-            # The model moved ``extra`` samples of its core into the delay line (latency.refine_delay).
+            # The model moved ``extra`` samples of its core into the delay line (sysid.estimation.delay.moved_delay).
             body = compensate_delay(body, extra)
             delay += extra
             latency = dataclasses.replace(latency, samples=delay, refined_by=extra)
@@ -247,21 +241,81 @@ def _decompositions(spectra: Spectra, grid: GridResult, band, feedthrough: bool,
     return decompositions, grid_gammas
 
 
-def _without_freed_pole(poles: np.ndarray, band: tuple[float, float], fs: float) -> np.ndarray | None:
-    """The poles without the one (or conjugate pair) nearest the unit circle among those whose frequency
-    angle(p) fs / 2 pi (Hz) lies outside ``band``; None when every pole is in band."""
-    frequency = np.abs(np.angle(poles)) * fs / (2 * np.pi)
-    outside = np.flatnonzero((frequency < band[0]) | (frequency > band[1]))
-    if outside.size == 0 or poles.size < 2:
-        return None
-    worst = poles[outside[np.argmax(np.abs(poles[outside]))]]
-    keep = np.abs(poles - worst) > 1e-12
-    if abs(worst.imag) > 0:
-        keep &= np.abs(poles - np.conj(worst)) > 1e-12
-    return poles[keep]
+@dataclass(frozen=True)
+class _Behind:
+    """What the refinement's steps share: the data behind the current delay, and the options.
+
+    ``body``: the noise recording's first seconds, its lines out, the ear signal advanced by ``delay``;
+    ``sweeps``: the two sweeps, their lines out; ``sweep_spectra``: their DFT bins behind ``delay``.
+    """
+
+    body: Recording
+    sweeps: list[Recording]
+    sweep_spectra: list[SweepSpectrum]
+    delay: int
+    path: str
+    options: IdentificationOptions
+
+    def time_rms(self, c, delay: int) -> float:
+        """The validation rms of the core c (A, B, C, D) behind ``delay`` by time-domain simulation: a pole
+        the in-band fit leaves near z = 1 (a spare one, out of the band it sees) shows only here, not in the
+        sweeps' spectra."""
+        core = Model(path=self.path, fs=self.body.fs, A=c.A, B=c.B, C=c.C, D=c.D, delay=delay)
+        return simulated_rms(core, self.sweeps, self.options.validation_band)
 
 
-def _settle(pick: OrderCandidate, pick_rms: float, block, sweep_spectra, time_rms, delay: int, options):
+def _refine(data: _Behind, spectra: Spectra, grid: GridResult, floor: float, provenance: dict, progress, lead: int = 0):
+    """(the refined model, its validation rms, the order scan, samples moved into the delay line or None when the
+    delay was not refined): order search and pick, settling, moved delay, final refinement, reduction."""
+    options = data.options
+    scan_block = block_data(data.body, options.band, options.scan_seconds)
+    candidates, grid_gammas = _order_search(data, scan_block, spectra, grid, floor, progress)
+    scan = [c.to_dict() for c in candidates]
+    # The lowest order within min_gain of the best validation rms.
+    best_rms = min(c.rms for c in candidates)
+    pick = next(c for c in candidates if c.rms <= best_rms * (1 + options.min_gain))
+    pick, pick_rms = _settle(pick, data.time_rms(pick, data.delay), scan_block, data)
+    extra = None
+    if options.latency:
+        trial_options = TrialOptions(options.band, options.validation_band, options.scan_seconds,
+                                     options.refine_seconds, options.feedthrough, options.min_gain)
+        moved = moved_delay(pick, pick_rms, candidates, data.body, data.sweeps, data.delay, data.time_rms,
+                            trial_options, lead)
+        extra = 0 if moved is None else moved.extra
+        if moved is not None:
+            pick, pick_rms = moved.pick, moved.rms
+            data = dataclasses.replace(data, body=moved.body, sweep_spectra=moved.sweep_spectra,
+                                       delay=data.delay + moved.extra)
+    block, refined = _final_refinement(pick, pick_rms, data)
+    # States the data did not ask for out: poles parked at the block's radius bound, states no balanced
+    # realisation of the full order holds (sysid.estimation.reduction).
+    reduced = without_degenerate_states(refined.A, refined.B, refined.C, refined.D, refined.rms, block,
+                                        lambda c: data.time_rms(c, data.delay), options.min_gain, options.feedthrough)
+    gamma = pick.gamma if pick.gamma is not None else grid_gammas.get(pick.order, grid.chosen.gamma)
+    model = Model(path=data.path, fs=data.body.fs, A=reduced.A, B=reduced.B, C=reduced.C, D=reduced.D,
+                  delay=data.delay,
+                  identification=dict(provenance, method="latency, seed grid, then order search with output-error "
+                                                         "refinement from several starts on raw DFT data",
+                                      refinement={"start_gamma": gamma, "start": pick.start, "order": pick.order,
+                                                  "reflected_poles": pick.reflected, "reduced": reduced.removed,
+                                                  "block_seconds": block.length / data.body.fs, "order_scan": scan}))
+    return model, reduced.rms, scan, extra
+
+
+def _order_search(data: _Behind, scan_block, spectra: Spectra, grid: GridResult, floor: float, progress):
+    """(the best refined model of each order, ``order_search.search_orders`` on the scan block, and each order's
+    best grid gamma)."""
+    options = data.options
+    # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
+    orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
+    decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, max(orders))
+    candidates = search_orders(scan_block, data.sweep_spectra, decompositions, grid_gammas, orders, floor,
+                               feedthrough=options.feedthrough, at_floor=options.at_floor, min_gain=options.min_gain,
+                               progress=progress)
+    return candidates, grid_gammas
+
+
+def _settle(pick: OrderCandidate, pick_rms: float, block, data: _Behind) -> tuple[OrderCandidate, float]:
     """The pick with out-of-band poles run to the unit circle dropped, when that validates better in time.
 
     A fit on the band's bins leaves spare poles free outside it; one that runs toward z = 1 or
@@ -269,121 +323,35 @@ def _settle(pick: OrderCandidate, pick_rms: float, block, sweep_spectra, time_rm
     but rings in the simulated sweeps (random helmet 63, short session: sweeps' spectra 1.1x,
     simulation 118x; 41: 6.8e6x). While the time-domain validation rms ``pick_rms`` exceeds
     the spectra's (``pick.rms``) by more than ``min_gain``, the out-of-band pole nearest the
-    unit circle is dropped and the rest refitted on ``block``, up to _SETTLE_DROPS times; the
-    refit with the lowest time-domain rms is kept if it beats the pick's.
+    unit circle is dropped (``order_search.without_freed_pole``) and the rest refitted on ``block``, up to
+    ``SETTLE_DROPS`` times; the refit with the lowest time-domain rms is kept if it beats the pick's.
     """
+    options = data.options
     current, best, best_rms = pick, pick, pick_rms
     current_rms = pick_rms
-    for _ in range(_SETTLE_DROPS):
+    for _ in range(SETTLE_DROPS):
         if current_rms <= current.rms * (1 + options.min_gain):
             break
-        poles = _without_freed_pole(np.linalg.eigvals(current.A), options.band, block.fs)
+        poles = without_freed_pole(np.linalg.eigvals(current.A), options.band, block.fs)
         if poles is None:
             break
         n = poles.size
         fit = refine_output_error(lti.real_block_diagonal(poles), np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)),
                                   block, feedthrough=options.feedthrough, max_iterations=20, noise_tolerance=True)
-        current = OrderCandidate(n, pick.start + ", free pole dropped", sweep_rms(fit.A, fit.B, fit.C, fit.D, sweep_spectra),
-                                 fit.A, fit.B, fit.C, fit.D, pick.reflected)
-        current_rms = time_rms(current, delay)
+        current = OrderCandidate(n, pick.start + ", free pole dropped",
+                                 sweep_rms(fit.A, fit.B, fit.C, fit.D, data.sweep_spectra), fit.A, fit.B, fit.C, fit.D,
+                                 pick.reflected, pick.gamma)
+        current_rms = data.time_rms(current, data.delay)
         if current_rms < best_rms:
             best, best_rms = current, current_rms
     return best, best_rms
 
 
-def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, options, provenance, progress, lead=0):
-    scan_block = block_data(body, options.band, options.scan_seconds)
-    # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
-    orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
-    decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, max(orders))
-    candidates = search_orders(scan_block, sweep_spectra, decompositions, grid_gammas, orders, floor,
-                               feedthrough=options.feedthrough, at_floor=options.at_floor, min_gain=options.min_gain,
-                               progress=progress)
-    scan = [c.to_dict() for c in candidates]
-    # The lowest order within min_gain of the best validation rms.
-    best_rms = min(c.rms for c in candidates)
-    pick = next(c for c in candidates if c.rms <= best_rms * (1 + options.min_gain))
-    def time_rms(c, d):
-        # The validation rms by time-domain simulation: a pole the in-band fit leaves near z = 1
-        # (a spare one, out of the band it sees) shows only here, not in the sweeps' spectra.
-        core = Model(path=path, fs=body.fs, A=c.A, B=c.B, C=c.C, D=c.D, delay=d)
-        return simulated_rms(core, sweeps, options.validation_band)
-
-    pick_rms = time_rms(pick, delay)
-    pick, pick_rms = _settle(pick, pick_rms, scan_block, sweep_spectra, time_rms, delay, options)
-    extra = None
-    if options.latency:
-        # The onset errs short by the smoothing kernel's lead, or long on a slowly rising response; the
-        # picked core's poles say by how much.
-        # Read short (or right), the refitted costs settle it, walked one sample at a time from the fixed poles'
-        # answer; read long, the refitted costs below the onset's delay (latency.decide_delay, shared with refits).
-        walked = decide_delay(pick.A, body, options.band, options.scan_seconds, delay, feedthrough=options.feedthrough,
-                              lead=lead, long_seconds=options.refine_seconds)
-        extra = walked.extra
-        # The walk's answer first; a trial the sweeps reject (a freed pole run toward z = 1 rings in the simulated
-        # sweeps: random helmet 2, short, one sample past the true delay at 84x) the next shorter delays it visited.
-        # Read long, one sample shorter too: where the costs at the pick's core barely tell two delays apart
-        # the decision may land on the longer by round-off, and behind one sample too many no causal core fits
-        # (random helmet 94, short, pure delay 19: read 23, decided 20 or 19 by the last bits of a factorisation;
-        # at 20 the moved core validates at 5.7x, at 19 at 1.00x), while one sample short costs a zero.
-        tries = ([extra] + ([extra - 1] if delay + extra > 0 else []) if extra < 0
-                 else [j for j in sorted(walked.fits, reverse=True) if 0 < j <= extra])
-        moved_by, best_move = 0, None
-        for extra in tries[:_DELAY_TRIES] if extra else []:
-            longer = compensate_delay(body, extra)
-            longer_sweeps = [sweep_spectrum(compensate_delay(s, delay + extra), options.validation_band) for s in sweeps]
-            # The same poles behind the longer delay, refitted on the scan block (numerator and poles); and the
-            # next lower orders' poles: the samples now in the delay line free the poles that imitated them, and
-            # a freed pole, out of the band the fit sees, can drift to z = 1 (sweeps' spectra right, simulation not).
-            scan_longer = block_data(longer, options.band, options.scan_seconds)
-            moved, moved_rms = None, np.inf
-            # (poles still to drop, label, start model, reflected poles): the pick's own refit may drop up to
-            # _FREED_ORDERS poles, one at a time, below.
-            # Read long, the pick's poles were spent on imitating a lead (poles run to z = -1): the next higher
-            # orders of the scan may hold the structure the lead displaced (random helmet 41, short: the high-pass
-            # pole missing from the pick at n 17, delay 12), and the lower ones stay (94, short: n 6 for 6, 5.7x
-            # from the pick's own order and higher ones alone).
-            near = range(pick.order - _FREED_ORDERS, pick.order + (_FREED_ORDERS + 1 if extra < 0 else 0))
-            starts = [(_FREED_ORDERS if c is pick else 0, c.start, c.A, c.B, c.C, c.D, c.reflected)
-                      for c in [pick, *[c for c in candidates if c.order in near and c is not pick]]]
-            if extra in walked.fits:
-                # And from the walk's poles at that delay (refine_output_error uses only the poles): refitted there
-                # from the neighbouring delay's, they may sit in another minimum than the pick's own refit reaches.
-                starts.insert(1, (0, pick.start + ", walked", walked.fits[extra].A, pick.B, pick.C, pick.D,
-                                  pick.reflected))
-            while starts:
-                drops, label, A0, B0, C0, D0, reflected = starts.pop(0)
-                fit = refine_output_error(A0, B0, C0, D0, scan_longer, feedthrough=options.feedthrough, max_iterations=20,
-                                          noise_tolerance=True)
-                trial = OrderCandidate(fit.A.shape[0], label, sweep_rms(fit.A, fit.B, fit.C, fit.D, longer_sweeps),
-                                       fit.A, fit.B, fit.C, fit.D, reflected)
-                # A pole at the block's radius bound (output_error.decay_bound, 1 - 2e-5 on a 1 s block at 48 kHz)
-                # is a freed pole run out of the data's reach, not a coupling high-pass (a 5 Hz corner at 48 kHz is
-                # |p| = 0.9993).
-                settled = not at_radius_bound(np.linalg.eigvals(fit.A), scan_longer)
-                accepted = trial.rms <= pick.rms * (1 + options.min_gain)
-                # Simulated (0.1 s of CPU for two 9 s sweeps) only when it decides something: a trial the sweeps'
-                # spectra accept, or whether a settled trial's pole is dropped below.
-                trial_rms = time_rms(trial, delay + extra) if accepted or (drops and settled) else np.inf
-                if accepted and trial_rms < moved_rms:
-                    moved, moved_rms = trial, trial_rms
-                if drops and (not settled or trial_rms > trial.rms * (1 + options.min_gain)):
-                    # The simulation disagrees with the sweeps' spectra, or a pole ran to z = 1: drop it and refit.
-                    poles = _without_freed_pole(np.linalg.eigvals(fit.A), options.band, body.fs)
-                    if poles is not None:
-                        starts.append((drops - 1, label + ", freed pole dropped", lti.real_block_diagonal(poles),
-                                       np.zeros((poles.size, 1)), np.zeros((1, poles.size)), np.zeros((1, 1)), reflected))
-            if moved is not None and moved_rms <= pick_rms * (1 + options.min_gain):
-                # The decided delay first; the shorter one replaces it only when it validates clearly better.
-                if best_move is None or moved_rms < best_move[0] * (1 - options.min_gain):
-                    best_move = (moved_rms, moved, extra, longer, longer_sweeps)
-                if extra >= 0:
-                    break
-        if best_move is not None:
-            pick_rms, pick, moved_by, body, sweep_spectra = best_move
-            delay += moved_by
-        extra = moved_by  # 0 when the sweeps disagree with every try: the onset's delay stays
-    block = block_data(body, options.band, options.refine_seconds)
+def _final_refinement(pick: OrderCandidate, pick_rms: float, data: _Behind):
+    """(the long block, the pick refined on it with its time-domain validation rms, or the pick itself when that
+    validates better): ``refine_seconds`` of the noise recording behind the delay."""
+    options = data.options
+    block = block_data(data.body, options.band, options.refine_seconds)
     # Stopped once an iteration gains less than the noise can tell (output_error's noise_tolerance, as every
     # refinement here): the pick sits near the long block's minimum, and MINPACK's default tolerance crawled
     # on for 50 iterations (random helmet 5, thesis length: 18 s of CPU for 4e-6 of the cost). A pair the scan ran to
@@ -391,21 +359,8 @@ def _refine(body, sweeps, sweep_spectra, spectra, grid, path, delay, floor, opti
     # evaluations of the 10 s block, 1016 noise variances off the cost against 420; 11.5 -> 8.1 s of CPU).
     oe = refine_output_error(pick.A, pick.B, pick.C, pick.D, block, feedthrough=options.feedthrough, max_iterations=60,
                              noise_tolerance=True, split_near_real=True)
-    A, B, C, D = oe.A, oe.B, oe.C, oe.D
-    rms = time_rms(oe, delay)
+    rms = data.time_rms(oe, data.delay)
     if rms > pick_rms:
         # The longer block did not help on the sweeps: keep the scan's model of that order.
-        A, B, C, D, rms = pick.A, pick.B, pick.C, pick.D, pick_rms
-    # States the data did not ask for out: poles parked at the block's radius bound, states no balanced
-    # realisation of the full order holds (sysid.estimation.reduction).
-    reduced = without_degenerate_states(A, B, C, D, rms, block, lambda c: time_rms(c, delay), options.min_gain,
-                                        options.feedthrough)
-    A, B, C, D, rms = reduced.A, reduced.B, reduced.C, reduced.D, reduced.rms
-    gamma = int(pick.start.split("=")[1]) if pick.start.startswith("grid gamma=") else grid_gammas.get(pick.order, grid.chosen.gamma)
-    model = Model(path=path, fs=body.fs, A=A, B=B, C=C, D=D, delay=delay,
-                  identification=dict(provenance, method="latency, seed grid, then order search with output-error "
-                                                         "refinement from several starts on raw DFT data",
-                                      refinement={"start_gamma": gamma, "start": pick.start, "order": pick.order,
-                                                  "reflected_poles": pick.reflected, "reduced": reduced.removed,
-                                                  "block_seconds": block.length / body.fs, "order_scan": scan}))
-    return model, rms, scan, extra
+        return block, Reduced(pick.A, pick.B, pick.C, pick.D, pick_rms)
+    return block, Reduced(oe.A, oe.B, oe.C, oe.D, rms)

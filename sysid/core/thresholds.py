@@ -47,6 +47,78 @@ LINE_RATIO = 40.0
 # ---------------------------------------------------------------------------------------------------------------------
 # Identification: the order search, the settling of a pick, the reduction (sysid.identify, sysid.estimation).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["DEFAULT_GAMMAS", "DEFAULT_ORDERS", "GRID_KEEP_BEST", "START_GAMMAS", "ORDER_AT_FLOOR", "MIN_GAIN",
+            "ORDER_PATIENCE", "NEAR_FLOOR", "NEAR_PATIENCE", "INSERT_PATIENCE", "SCAN_ITERATIONS", "REFINED_STARTS",
+            "SCREEN_RATIO", "NEW_MODE_Q", "INSERT_FREQUENCIES", "INSERT_Q", "INSERT_REFINED", "INSERT_ROUNDS",
+            "START_REAL_POLES", "START_COINCIDE", "START_SEPARATION", "BLOCK_NOISE_SIGMAS", "SETTLE_DROPS",
+            "BALANCED_TOLERANCE", "NEGLIGIBLE_HSV", "BOUND_REFIT_ITERATIONS", "TAIL_FRACTIONS", "TRUNCATION_GAIN",
+            "POLISH_ITERATIONS"]
+
+# The seed's grid (``sysid.estimation.grid``): smoothing widths gamma and orders n, and the candidates of lowest
+# compressed validation rms re-evaluated exactly at every sweep bin.
+DEFAULT_GAMMAS = tuple(range(10, 1001, 10))
+DEFAULT_ORDERS = tuple(range(1, 21))
+GRID_KEEP_BEST = 10
+# The order search (``sysid.estimation.order_search``). Smoothing widths whose subspace models start every order,
+# besides the grid's best of that order.
+START_GAMMAS = (30, 100, 300)
+# It ends once a model validates within ORDER_AT_FLOOR times the noise floor; ``identify`` picks the lowest order
+# within MIN_GAIN (relative) of the best validation rms, and a trial counts when it validates within MIN_GAIN too.
+ORDER_AT_FLOOR = 1.02
+MIN_GAIN = 0.03
+# It ends after ORDER_PATIENCE orders without 1 % gain, or NEAR_PATIENCE near the floor (within NEAR_FLOOR times
+# it, or the residual at the block's noise level); a missed mode is inserted after INSERT_PATIENCE orders without
+# gain above NEAR_FLOOR times the floor. Output-error iterations of each refined start: SCAN_ITERATIONS.
+ORDER_PATIENCE = 6
+NEAR_FLOOR = 1.5
+NEAR_PATIENCE = 2
+INSERT_PATIENCE = 3
+SCAN_ITERATIONS = 20
+# Refined starts per order (the best by the fixed-pole cost), the second only when its cost is within SCREEN_RATIO
+# of the first's; the quality factor of a mode placed at the largest residual.
+REFINED_STARTS = 2
+SCREEN_RATIO = 2.0
+NEW_MODE_Q = 10.0
+# Mode insertion after a stalled scan (``_insert_modes``): a pair of each Q of INSERT_Q at each of
+# INSERT_FREQUENCIES log-spaced frequencies across the block's band is screened, the best INSERT_REFINED refined,
+# for up to INSERT_ROUNDS rounds while a round gains 1 %.
+INSERT_FREQUENCIES = 40
+INSERT_Q = (3.0, 20.0)
+INSERT_REFINED = 3
+INSERT_ROUNDS = 3
+# Real poles a start may take for a pole it adds or replaces (``distinct_start``), the usual added pole 0.5 first:
+# roll-off corners (a real pole exp(-2 pi f_c / f_s) is 0.07-0.88 for 1-20 kHz at 48 kHz), coupling high-pass
+# corners near z = 1, and negative poles for what lies near Nyquist.
+START_REAL_POLES = (0.5, 0.3, 0.7, 0.1, 0.85, -0.3, 0.93, 0.97, -0.7, 0.99)
+# Distance below which two poles of a start coincide, and the least distance of a placed real pole from every
+# other pole of the start.
+START_COINCIDE = 1e-6
+START_SEPARATION = 1e-2
+# A block residual within this many standard deviations of the noise energy the floor predicts is at the block's
+# noise level (``block_at_noise``).
+BLOCK_NOISE_SIGMAS = 3.0
+# Out-of-band poles dropped at most from a pick whose simulation disagrees with the sweeps' spectra
+# (``sysid.identify``'s settling of the order search's pick).
+SETTLE_DROPS = 4
+# The reduction (``sysid.estimation.reduction``). Largest departure of a balanced realisation's Gramians from one
+# diagonal matrix, relative to the largest Hankel singular value (the square-root method reaches 1e-9; a
+# realisation it gave up on is off by orders of magnitude); Hankel singular values, relative to the largest, below
+# which a state is left out when the model cannot be balanced at its full order (a change of the response below
+# 2 n 1e-10 of the peak).
+BALANCED_TOLERANCE = 1e-6
+NEGLIGIBLE_HSV = 1e-10
+# Evaluations of the refit without the poles at the radius bound: one, the kept poles held and the rest (B, D,
+# the block's transient) refitted by linear least squares. On the final 10 s block an evaluation costs about
+# 0.1 s; the thesis-length random helmets 0 and 79 reached the same validation rms with 1 as with 20 (4 used),
+# the step's CPU 0.31 -> 0.25 s and 0.55 -> 0.25 s.
+BOUND_REFIT_ITERATIONS = 1
+# Sums of the removed Hankel singular values, relative to the largest, of the truncations tried (lowest order
+# first), and the rise of the validation rms a truncation may cost: a third of the order search's MIN_GAIN, so
+# that a model near the 1.2x criterion is not traded for order. Evaluations of the refinement of a truncated
+# model on the block (stopped sooner by the noise tolerance).
+TAIL_FRACTIONS = (1e-3, 1e-4)
+TRUNCATION_GAIN = 0.01
+POLISH_ITERATIONS = 20
 
 # Output-error refinement (sysid.estimation.output_error, sysid.estimation.modal_parametrisation).
 # A pole counts as at the radius bound when its decay rate -ln|p| is within this fraction above
@@ -63,6 +135,43 @@ __all__ += ["AT_RADIUS_BOUND", "NEAR_REAL_PAIR", "NEAR_REAL_SPLIT"]
 # ---------------------------------------------------------------------------------------------------------------------
 # The delay (sysid.estimation.delay: the one place it is decided).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["ONSET_COHERENCE", "ONSET_PEAK_FRACTION", "ONSET_NOISE_MULTIPLE", "DELAY_WINDOW", "DELAY_WIDEST",
+            "DELAY_TOLERANCE", "DELAY_DIP", "DELAY_REFIT_ITERATIONS", "WALK_SPAN", "WALK_CLEAR", "WALK_STEP",
+            "DELAY_TRIES", "FREED_ORDERS", "SHORTER_BY", "MAX_EXTRA_DELAY"]
+
+# The onset (``estimate_latency``): the band ends where the 9-bin averaged squared coherence falls to
+# ONSET_COHERENCE; the onset is the first sample above ONSET_PEAK_FRACTION of the peak and ONSET_NOISE_MULTIPLE
+# times the RMS of the response at negative times.
+ONSET_COHERENCE = 0.5
+ONSET_PEAK_FRACTION = 0.1
+ONSET_NOISE_MULTIPLE = 6.0
+# ``refine_delay``: the fixed-pole costs' first window, DELAY_WINDOW samples either side of the onset's delay, grown
+# by as much at a time up to DELAY_WIDEST; a delay is within the tolerance when its cost is within DELAY_TOLERANCE
+# output-noise variances sigma^2 = V / (2 M) (M bins) of the smallest. A cost dip past the answer is refitted when
+# within DELAY_DIP of the smallest cost; each refit runs DELAY_REFIT_ITERATIONS output-error iterations (a start near
+# the answer converges in a few).
+DELAY_WINDOW = 4
+DELAY_WIDEST = 12
+DELAY_TOLERANCE = 40.0
+DELAY_DIP = 0.10
+DELAY_REFIT_ITERATIONS = 10
+# ``walk_delay``: samples it may move from refine_delay's answer (further when the band's kernel lead is longer);
+# it walks up until a cost rises WALK_CLEAR sigma^2 above the smallest (past the true delay the cost rises by 3 %
+# to 20x a sample where the response's first sample is not small, thousands of sigma^2), and refits again from the
+# best core's poles the delays within it; it decides up from the smallest cost through costs within WALK_STEP
+# sigma^2 of it (``_decided``).
+WALK_SPAN = 12
+WALK_CLEAR = 20.0
+WALK_STEP = 2.0
+# ``moved_delay``, after identify's order search: delays walked to tried at most on the sweeps, longest first;
+# lower orders refitted behind a moved delay (their poles need not imitate it).
+DELAY_TRIES = 3
+FREED_ORDERS = 2
+# ``shorter_delays``, after a data correction's refit: samples the onset may read long (``refine_delay``'s window
+# below the onset), the delays the core is identified anew behind.
+SHORTER_BY = 4
+# The delay detector's fixed-pole scan: total delays up to the model's and this many more.
+MAX_EXTRA_DELAY = 120
 
 
 
@@ -124,3 +233,20 @@ __all__ += ["SILENT_RMS", "UNCORRELATED_COHERENCE", "EAR_COHERENCE_BAND_HZ", "EA
 # ---------------------------------------------------------------------------------------------------------------------
 # Refinement: the structures and data corrections refine adds (sysid.refits).
 # ---------------------------------------------------------------------------------------------------------------------
+__all__ += ["WARM_ENOUGH", "EIV_MIN_ATTENUATION", "CLIPPING_PASSES", "CLOCK_AR_ORDER", "CLOCK_AR_FLOOR", "CLOCK_PASSES"]
+
+# A warm start within this factor of the noise floor makes the re-identification needless. Stricter
+# than AT_FLOOR: a warm start "at the floor" by AT_FLOOR may still lie 20 % above what a fresh fit
+# reaches (the README's delay-and-hum example: 1.15x warm, 1.01x re-identified).
+WARM_ENOUGH = 1.05
+# ``add_input_noise``: the H1 attenuation 1 - P_n / S_uu is not divided out below this (bins where the input
+# is mostly its own noise carry next to nothing of the path; dividing by a tiny factor would only amplify noise).
+EIV_MIN_ATTENUATION = 0.2
+# Passes of the refit on data with excluded stretches: each fills them with the last model's prediction.
+CLIPPING_PASSES = 3
+# Order of the residual's AR model that whitens the clock ratio's regression (``clock_residual``), and its white
+# floor (diagonal loading) relative to the residual's power.
+CLOCK_AR_ORDER = 32
+CLOCK_AR_FLOOR = 0.01
+# Passes of the clock ratio's refinement after a clock correction's refit (``refined_clock``).
+CLOCK_PASSES = 2

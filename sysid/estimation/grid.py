@@ -20,14 +20,12 @@ from threadpoolctl import threadpool_limits
 
 from ..core import lti
 from ..core.errors import IdentificationError
+from ..core.thresholds import DEFAULT_GAMMAS, DEFAULT_ORDERS, GRID_KEEP_BEST
 from ..validation.sweeps import CompressedValidation, SweepSpectrum, rms_from_responses
 from .spectra import Spectra, smoothed_responses
 from .subspace import SubspaceDecomposition, SubspaceFit
 
 __all__ = ["GridResult", "Candidate", "grid_search", "terminal_progress", "parse_range"]
-
-DEFAULT_GAMMAS = tuple(range(10, 1001, 10))
-DEFAULT_ORDERS = tuple(range(1, 21))
 
 
 @dataclass
@@ -102,7 +100,7 @@ def terminal_progress(stream=None):
 
 def grid_search(spectra: Spectra, sweeps: list[SweepSpectrum], band: tuple[float, float],
                 gammas=DEFAULT_GAMMAS, orders=DEFAULT_ORDERS, q: int | None = None, feedthrough: bool = False,
-                keep_best: int = 10, progress=None) -> GridResult:
+                keep_best: int = GRID_KEEP_BEST, progress=None) -> GridResult:
     """Evaluate every (gamma, order) candidate; see the module docstring."""
     # The matrices are small (at most 2M x 2q); BLAS threads only add overhead here.
     with threadpool_limits(limits=1, user_api="blas"):

@@ -42,46 +42,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import lti
-from ..core.thresholds import AT_FLOOR
+from ..core.thresholds import (AT_FLOOR, BLOCK_NOISE_SIGMAS, INSERT_FREQUENCIES, INSERT_PATIENCE, INSERT_Q,
+                               INSERT_REFINED, INSERT_ROUNDS, MIN_GAIN, NEAR_FLOOR, NEAR_PATIENCE, NEW_MODE_Q,
+                               ORDER_AT_FLOOR, ORDER_PATIENCE, REFINED_STARTS, SCAN_ITERATIONS, SCREEN_RATIO,
+                               START_COINCIDE, START_GAMMAS, START_REAL_POLES, START_SEPARATION)
 from ..validation.sweeps import SweepSpectrum, band_energy, rms_from_responses
 from .output_error import (BlockData, added_pole_costs, linear_cost, radius_bound_mask, refine_output_error,
                            residual_spectrum)
 from .subspace import SubspaceDecomposition, data_subspace_poles, reflect_unstable
 
-__all__ = ["OrderCandidate", "search_orders", "distinct_start", "START_GAMMAS"]
-
-# Smoothing widths whose subspace models start every order, besides the grid's best of that order.
-START_GAMMAS = (30, 100, 300)
-# Refined starts per order (the best by the fixed-pole cost), the second only when its cost
-# is within _SCREEN_RATIO of the first's.
-_REFINED_STARTS = 2
-_SCREEN_RATIO = 2.0
-# Damping of a mode placed at the largest residual (Q of the new pair).
-_NEW_MODE_Q = 10.0
-# Mode insertion after a stalled scan (``_insert_modes``): it runs only when the best model
-# validates above AT_FLOOR times the floor; a pair of each Q at each of _INSERT_FREQUENCIES
-# log-spaced frequencies across the block's band is screened, the best _INSERT_REFINED refined,
-# for up to _INSERT_ROUNDS rounds while a round gains 1 %.
-_INSERT_FREQUENCIES = 40
-_INSERT_Q = (3.0, 20.0)
-_INSERT_REFINED = 3
-_INSERT_ROUNDS = 3
-# Real poles a start may take for a pole it adds or replaces (``distinct_start``), the usual added
-# pole 0.5 first: roll-off corners (a real pole exp(-2 pi f_c / f_s) is 0.07-0.88 for 1-20 kHz at
-# 48 kHz), coupling high-pass corners near z = 1, and negative poles for what lies near Nyquist.
-_REAL_POLES = (0.5, 0.3, 0.7, 0.1, 0.85, -0.3, 0.93, 0.97, -0.7, 0.99)
-# Distance below which two poles of a start coincide (``distinct_start``), and the least distance of
-# a placed real pole from every other pole of the start.
-_COINCIDE = 1e-6
-_SEPARATION = 1e-2
-# A block residual within this many standard deviations of the noise energy the floor predicts
-# is at the block's noise level (``block_at_noise``).
-_NOISE_SIGMAS = 3.0
+__all__ = ["OrderCandidate", "search_orders", "distinct_start", "without_freed_pole"]
 
 
 @dataclass
 class OrderCandidate:
-    """The best refined model of one order, from which start, and its validation rms (FS)."""
+    """The best refined model of one order, from which start, and its validation rms (FS).
+
+    ``gamma``: the smoothing width of the ``grid gamma=G`` start the candidate descends from (refitted,
+    moved behind another delay or with a pole dropped), None for the other starts.
+    """
 
     order: int
     start: str
@@ -91,6 +70,7 @@ class OrderCandidate:
     C: np.ndarray
     D: np.ndarray
     reflected: int = 0
+    gamma: int | None = None
 
     def to_dict(self) -> dict:
         return {"order": self.order, "start": self.start, "refined_rms": self.rms, "reflected_poles": self.reflected}
@@ -117,7 +97,7 @@ def block_at_noise(A, block: BlockData, sweeps: list[SweepSpectrum], floor: floa
     / L) is compared with floor^2, the output noise's mean square in that band measured from the
     two sweeps: no model can lower it further. The estimate of a sum of N complex bins of noise
     has a relative standard deviation of 1/sqrt(N) (chi-square with 2N degrees of freedom, 1.6 %
-    for a 1 s block at 4 kHz); within _NOISE_SIGMAS of it, a better model cannot be told apart on
+    for a 1 s block at 4 kHz); within BLOCK_NOISE_SIGMAS of it, a better model cannot be told apart on
     this block, whatever the sweeps' rms says (they weigh the bass more than the noise block does).
     """
     residual = residual_spectrum(A, block, feedthrough=feedthrough)
@@ -126,7 +106,7 @@ def block_at_noise(A, block: BlockData, sweeps: list[SweepSpectrum], floor: floa
     if not np.any(inside):
         return False
     mean_square = band_energy(residual[inside], block.length) / block.length
-    return bool(mean_square <= (1 + _NOISE_SIGMAS / np.sqrt(np.count_nonzero(inside))) * floor**2)
+    return bool(mean_square <= (1 + BLOCK_NOISE_SIGMAS / np.sqrt(np.count_nonzero(inside))) * floor**2)
 
 
 def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np.ndarray:
@@ -137,14 +117,14 @@ def _residual_mode(poles: np.ndarray, block: BlockData, feedthrough: bool) -> np
     # Average over about 1 % of the bins so that one noisy bin does not decide.
     width = max(1, block.z.size // 100)
     smoothed = np.convolve(relative, np.ones(width) / width, mode="same")
-    return _pair(float(np.angle(block.z[int(np.argmax(smoothed))])), _NEW_MODE_Q)
+    return _pair(float(np.angle(block.z[int(np.argmax(smoothed))])), NEW_MODE_Q)
 
 
 def distinct_start(poles: np.ndarray, block: BlockData, feedthrough: bool, added: int = 0) -> np.ndarray:
     """The starting poles with every degenerate pole replaced by a real pole placed where the
     output-error cost wants it; ``added`` real poles more placed the same way.
 
-    A pole is degenerate when it coincides (within _COINCIDE) with an earlier one, or sits at the
+    A pole is degenerate when it coincides (within START_COINCIDE) with an earlier one, or sits at the
     block's radius bound (``output_error.radius_bound_mask``). Two coinciding poles give two
     identical regressor columns: the least squares is rank deficient (only their sum is fitted), and
     the two poles move apart only through the second-order terms of the iteration. A pole at the
@@ -154,11 +134,11 @@ def distinct_start(poles: np.ndarray, block: BlockData, feedthrough: bool, added
     shift-property solve, and spare poles run to the bound, inherited by every later ``order n-1 +
     real pole`` start (random helmet 41, short session: four real poles at z = -0.99998 from order
     14 on; 331 of its 820 factorisations ill-conditioned, 248 of them split for dependent columns;
-    255 and 38 of 861 with these starts). Each replacement is the real pole of _REAL_POLES, at least
-    _SEPARATION from every pole kept so far, whose fixed-pole cost (``output_error.added_pole_costs``:
+    255 and 38 of 861 with these starts). Each replacement is the real pole of START_REAL_POLES, at least
+    START_SEPARATION from every pole kept so far, whose fixed-pole cost (``output_error.added_pole_costs``:
     the kept poles' columns factored once) is lowest: distinct by construction, and where the kept
     poles' residual asks for a real pole. An added pole goes at 0.5, the scan's usual choice, unless
-    a kept pole lies within _SEPARATION of it; then it is placed as a replacement is. (Placing every
+    a kept pole lies within START_SEPARATION of it; then it is placed as a replacement is. (Placing every
     added pole by its cost put 7 more of the first 43 short random helmets outside issue 10's
     criteria, 6 of them by the delay the pipeline then settled on, 3 to 4 samples off.) A start with nothing degenerate is returned as given, plus the
     added poles.
@@ -178,20 +158,40 @@ def distinct_start(poles: np.ndarray, block: BlockData, feedthrough: bool, added
             continue
         members = [complex(p.real)] if is_real else [p, np.conj(p)]
         # A pair whose two poles coincide (a double real pole split by round-off) is degenerate too.
-        coincide = (not is_real and p.imag <= _COINCIDE / 2) or (
-            bool(placed) and min(np.min(np.abs(np.array(placed) - m)) for m in members) <= _COINCIDE)
+        coincide = (not is_real and p.imag <= START_COINCIDE / 2) or (
+            bool(placed) and min(np.min(np.abs(np.array(placed) - m)) for m in members) <= START_COINCIDE)
         if not bound and not coincide:
             placed += members
     replaced = poles.size - len(placed)
     for k in range(replaced + added):
-        candidates = [r for r in _REAL_POLES if not placed or np.min(np.abs(np.array(placed) - r)) >= _SEPARATION]
-        if not placed or (k >= replaced and candidates[0] == _REAL_POLES[0]):
+        candidates = [r for r in START_REAL_POLES
+                      if not placed or np.min(np.abs(np.array(placed) - r)) >= START_SEPARATION]
+        if not placed or (k >= replaced and candidates[0] == START_REAL_POLES[0]):
             placed.append(complex(candidates[0]))
             continue
         costs = added_pole_costs(lti.real_block_diagonal(np.array(placed)), [np.array([r]) for r in candidates],
                                  block, feedthrough=feedthrough)
         placed.append(complex(candidates[int(np.argmin(costs))]))
     return np.array(placed)
+
+
+def without_freed_pole(poles: np.ndarray, band: tuple[float, float], fs: float) -> np.ndarray | None:
+    """The poles without the one (or conjugate pair) nearest the unit circle among those whose frequency
+    angle(p) fs / 2 pi (Hz) lies outside ``band``; None when every pole is in band.
+
+    A fit on the band's bins leaves spare poles free outside it, and one run toward z = 1 or z = -1 rings in a
+    simulation the band's bins do not show: identify's settling of a pick (``sysid.identify``) and its moved-delay
+    trials (``sysid.estimation.delay.trials``) drop it and refit the rest.
+    """
+    frequency = np.abs(np.angle(poles)) * fs / (2 * np.pi)
+    outside = np.flatnonzero((frequency < band[0]) | (frequency > band[1]))
+    if outside.size == 0 or poles.size < 2:
+        return None
+    worst = poles[outside[np.argmax(np.abs(poles[outside]))]]
+    keep = np.abs(poles - worst) > 1e-12
+    if abs(worst.imag) > 0:
+        keep &= np.abs(poles - np.conj(worst)) > 1e-12
+    return poles[keep]
 
 
 def _pair(omega: float, q: float) -> np.ndarray:
@@ -214,8 +214,8 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
     few are refined at order n + 2.
     """
     frequencies_hz = np.abs(np.angle(block.z)) * block.fs / (2 * np.pi)
-    grid = np.geomspace(max(frequencies_hz.min(), 1.0), frequencies_hz.max(), _INSERT_FREQUENCIES)
-    for _ in range(_INSERT_ROUNDS):
+    grid = np.geomspace(max(frequencies_hz.min(), 1.0), frequencies_hz.max(), INSERT_FREQUENCIES)
+    for _ in range(INSERT_ROUNDS):
         record = min(c.rms for c in best.values())
         if record <= AT_FLOOR * floor:
             return
@@ -224,13 +224,13 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
         if n > max_order:
             return
         poles = np.linalg.eigvals(base.A)
-        trials = [(frequency, q, _pair(2 * np.pi * frequency / block.fs, q)) for frequency in grid for q in _INSERT_Q]
+        trials = [(frequency, q, _pair(2 * np.pi * frequency / block.fs, q)) for frequency in grid for q in INSERT_Q]
         # The fixed-pole cost of each trial, the base's columns factored once (``added_pole_costs``).
         costs = added_pole_costs(base.A, [pair for _, _, pair in trials], block, feedthrough=feedthrough)
         screened = [(cost, frequency, q, lti.real_block_diagonal(np.concatenate([poles, pair])))
                     for cost, (frequency, q, pair) in zip(costs, trials)]
         screened.sort(key=lambda item: item[0])
-        for _, frequency, q, A in screened[:_INSERT_REFINED]:
+        for _, frequency, q, A in screened[:INSERT_REFINED]:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
                                       feedthrough=feedthrough, max_iterations=max_iterations, noise_tolerance=True)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
@@ -243,9 +243,10 @@ def _insert_modes(best: dict[int, OrderCandidate], block: BlockData, sweeps: lis
 
 def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions: dict[int, SubspaceDecomposition],
                   grid_gammas: dict[int, int], orders, floor: float, feedthrough: bool = False,
-                  at_floor: float = 1.02, patience: int = 6, max_iterations: int = 20,
-                  near_floor: float = 1.5, near_patience: int = 2, min_gain: float = 0.03,
-                  insert_patience: int = 3, progress=None) -> list[OrderCandidate]:
+                  at_floor: float = ORDER_AT_FLOOR, patience: int = ORDER_PATIENCE,
+                  max_iterations: int = SCAN_ITERATIONS, near_floor: float = NEAR_FLOOR,
+                  near_patience: int = NEAR_PATIENCE, min_gain: float = MIN_GAIN,
+                  insert_patience: int = INSERT_PATIENCE, progress=None) -> list[OrderCandidate]:
     """The best refined model of each order tried (see the module docstring).
 
     ``decompositions`` maps gamma to the smoothed-FRF decomposition of that width;
@@ -266,7 +267,7 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
     best_so_far, since = np.inf, 0
     inserted = None  # the record after the last mode insertion
     for k, n in enumerate(orders):
-        starts: list[tuple[str, np.ndarray, int]] = []
+        starts: list[tuple[str, np.ndarray, int, int | None]] = []
         gammas = [grid_gammas[n]] if n in grid_gammas else []
         gammas += [g for g in START_GAMMAS if g in decompositions and g not in gammas]
         for gamma in gammas:
@@ -275,29 +276,30 @@ def search_orders(block: BlockData, sweeps: list[SweepSpectrum], decompositions:
                 continue
             A, _ = decomposition.observability(n)
             poles, moved = reflect_unstable(np.linalg.eigvals(A))
-            starts.append((f"grid gamma={gamma}", distinct_start(poles, block, feedthrough), moved))
+            starts.append((f"grid gamma={gamma}", distinct_start(poles, block, feedthrough), moved, gamma))
         poles, moved = reflect_unstable(raw[n])
-        starts.append(("raw subspace", distinct_start(poles, block, feedthrough), moved))
+        starts.append(("raw subspace", distinct_start(poles, block, feedthrough), moved, None))
         if n - 1 in best:
             previous = np.linalg.eigvals(best[n - 1].A)
-            starts.append((f"order {n - 1} + real pole", distinct_start(previous, block, feedthrough, added=1), 0))
+            starts.append((f"order {n - 1} + real pole", distinct_start(previous, block, feedthrough, added=1), 0,
+                           None))
         if n - 2 in best:
             previous = np.linalg.eigvals(best[n - 2].A)
             starts.append((f"order {n - 2} + mode", distinct_start(np.concatenate(
-                [previous, _residual_mode(previous, block, feedthrough)]), block, feedthrough), 0))
+                [previous, _residual_mode(previous, block, feedthrough)]), block, feedthrough), 0, None))
         screened = []
-        for label, poles, moved in starts:
+        for label, poles, moved, gamma in starts:
             A = lti.real_block_diagonal(poles)
-            screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved))
+            screened.append((linear_cost(A, block, feedthrough=feedthrough), label, A, moved, gamma))
         screened.sort(key=lambda item: item[0])
         # A start whose fixed-pole cost is far above the best one's rarely refines past it.
-        chosen = [item for item in screened[:_REFINED_STARTS] if item[0] <= _SCREEN_RATIO * screened[0][0]]
-        for _, label, A, moved in chosen:
+        chosen = [item for item in screened[:REFINED_STARTS] if item[0] <= SCREEN_RATIO * screened[0][0]]
+        for _, label, A, moved, gamma in chosen:
             fit = refine_output_error(A, np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)), block,
                                       feedthrough=feedthrough, max_iterations=max_iterations, noise_tolerance=True)
             rms = sweep_rms(fit.A, fit.B, fit.C, fit.D, sweeps)
             if n not in best or rms < best[n].rms:
-                best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved)
+                best[n] = OrderCandidate(n, label, rms, fit.A, fit.B, fit.C, fit.D, moved, gamma)
         if progress:
             progress(k + 1, len(orders), "order search")
         record = min(c.rms for c in best.values())

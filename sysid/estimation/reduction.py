@@ -18,9 +18,9 @@ nothing the data saw):
   of its peak).
 
 Then the balanced model is truncated to the order the data ask for: the lowest order whose removed
-Hankel singular values sum to at most _TAIL_FRACTIONS of the largest (twice that bounds the change of
+Hankel singular values sum to at most TAIL_FRACTIONS of the largest (twice that bounds the change of
 the frequency response, Moore 1981), kept when the time-domain validation rms rises by at most
-_TRUNCATION_GAIN (short sessions, the test's options: random helmet 0 order 16 -> 12, the true 12;
+TRUNCATION_GAIN (short sessions, the test's options: random helmet 0 order 16 -> 12, the true 12;
 17 22 -> 17, the true 17; 79 23 -> 18, the true 18; the rms within 1 %), then refined by output error on
 the block at its new order (a truncated model is not the least-squares fit of its order, which the 95 %
 band of ``sysid.estimation.uncertainty`` assumes), the refinement kept when it validates within the same 1 %.
@@ -37,29 +37,11 @@ from typing import Callable
 import numpy as np
 
 from ..core import lti
+from ..core.thresholds import (BALANCED_TOLERANCE, BOUND_REFIT_ITERATIONS, NEGLIGIBLE_HSV, POLISH_ITERATIONS,
+                               TAIL_FRACTIONS, TRUNCATION_GAIN)
 from .output_error import BlockData, at_radius_bound, radius_bound_mask, refine_output_error
 
 __all__ = ["Reduced", "is_balanced", "truncation_orders", "without_degenerate_states"]
-
-# Largest departure of a balanced realisation's Gramians from one diagonal matrix, relative to the
-# largest Hankel singular value (the square-root method reaches 1e-9; a realisation it gave up on is
-# off by orders of magnitude).
-_BALANCED_TOLERANCE = 1e-6
-# Hankel singular values, relative to the largest, below which a state is left out when the model
-# cannot be balanced at its full order (a change of the response below 2 n 1e-10 of the peak).
-_NEGLIGIBLE_HSV = 1e-10
-# Evaluations of the refit without the poles at the radius bound: one, the kept poles held and the rest
-# (B, D, the block's transient) refitted by linear least squares. On the final 10 s block an evaluation
-# costs about 0.1 s; the thesis-length random helmets 0 and 79 reached the same validation rms with 1 as
-# with 20 (4 used), the step's CPU 0.31 -> 0.25 s and 0.55 -> 0.25 s.
-_REFIT_ITERATIONS = 1
-# Sums of the removed Hankel singular values, relative to the largest, of the truncations tried (lowest
-# order first), and the rise of the validation rms a truncation may cost: a third of the order search's
-# min_gain, so that a model near the 1.2x criterion is not traded for order.
-_TAIL_FRACTIONS = (1e-3, 1e-4)
-_TRUNCATION_GAIN = 0.01
-# Evaluations of the refinement of a truncated model on the block (stopped sooner by the noise tolerance).
-_POLISH_ITERATIONS = 20
 
 
 @dataclass
@@ -76,7 +58,7 @@ class Reduced:
 
 def is_balanced(A, B, C) -> bool:
     """Whether both Gramians of the stable (A, B, C) equal one diagonal matrix within
-    _BALANCED_TOLERANCE of the largest Hankel singular value (``lti.balanced_realisation``'s result)."""
+    BALANCED_TOLERANCE of the largest Hankel singular value (``lti.balanced_realisation``'s result)."""
     return _balanced_hankel_values(A, B, C) is not None
 
 
@@ -91,7 +73,7 @@ def _balanced_hankel_values(A, B, C) -> np.ndarray | None:
         return None
     scale = max(np.max(np.abs(np.diag(wc))), 1e-300)
     off = np.max(np.abs(wc - np.diag(np.diag(wc)))) + np.max(np.abs(wc - wo))
-    balanced = np.all(np.isfinite(wc)) and np.all(np.isfinite(wo)) and off <= _BALANCED_TOLERANCE * scale
+    balanced = np.all(np.isfinite(wc)) and np.all(np.isfinite(wo)) and off <= BALANCED_TOLERANCE * scale
     return np.diag(wc) if balanced else None
 
 
@@ -110,7 +92,7 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
         kept = poles[~bound]
         n = kept.size
         fit = refine_output_error(lti.real_block_diagonal(kept), np.zeros((n, 1)), np.zeros((1, n)), np.zeros((1, 1)),
-                                  block, feedthrough=feedthrough, max_iterations=_REFIT_ITERATIONS,
+                                  block, feedthrough=feedthrough, max_iterations=BOUND_REFIT_ITERATIONS,
                                   noise_tolerance=True)
         refit = Reduced(fit.A, fit.B, fit.C, fit.D, np.inf,
                         f"{np.count_nonzero(bound)} poles at the radius bound dropped, the rest refitted")
@@ -120,7 +102,7 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
                 current = refit
     hsv = _balanced_hankel_values(current.A, current.B, current.C)
     if hsv is None:
-        truncated = lti.balanced_truncation(current.A, current.B, current.C, current.D, tol=_NEGLIGIBLE_HSV)
+        truncated = lti.balanced_truncation(current.A, current.B, current.C, current.D, tol=NEGLIGIBLE_HSV)
         if truncated is not None:
             removed = current.A.shape[0] - truncated[0].shape[0]
             note = (f"{removed} state{'s' if removed > 1 else ''} of negligible Hankel singular value left out" if removed
@@ -134,28 +116,28 @@ def without_degenerate_states(A, B, C, D, rms: float, block: BlockData, validate
     # lies outside the 95 % band the output-error covariance gives (thesis-length random helmets 0, 5, 9,
     # 14: coverage 0.52-0.71 at median widths of 0.01 %). Refined on the block from there, it is.
     fit = refine_output_error(truncated.A, truncated.B, truncated.C, truncated.D, block, feedthrough=feedthrough,
-                              max_iterations=_POLISH_ITERATIONS, noise_tolerance=True)
+                              max_iterations=POLISH_ITERATIONS, noise_tolerance=True)
     polished = Reduced(fit.A, fit.B, fit.C, fit.D, np.inf, truncated.removed + ", refined")
     if not at_radius_bound(np.linalg.eigvals(fit.A), block):
         polished.rms = validate(polished)
-        if polished.rms <= truncated.rms * (1 + _TRUNCATION_GAIN):
+        if polished.rms <= truncated.rms * (1 + TRUNCATION_GAIN):
             return polished
     return truncated
 
 
 def truncation_orders(hsv: np.ndarray) -> list[int]:
-    """For each of _TAIL_FRACTIONS the lowest order k whose removed Hankel singular values sum to at most
+    """For each of TAIL_FRACTIONS the lowest order k whose removed Hankel singular values sum to at most
     that fraction of the largest, sum_{i>k} sigma_i <= f sigma_1 (``hsv`` largest first); distinct orders
     below the full one, lowest first."""
     hsv = np.asarray(hsv, dtype=float)
     tail = np.append(np.cumsum(hsv[::-1])[::-1], 0.0)  # tail[k] = sum of hsv[k:]
-    orders = {int(np.argmax(tail <= f * hsv[0])) for f in _TAIL_FRACTIONS}
+    orders = {int(np.argmax(tail <= f * hsv[0])) for f in TAIL_FRACTIONS}
     return sorted(k for k in orders if 0 < k < hsv.size)
 
 
 def _truncated(current: Reduced, hsv: np.ndarray | None, validate: Callable[[Reduced], float]) -> Reduced:
     """``current`` truncated to the lowest of its ``truncation_orders`` whose validation rms is within
-    _TRUNCATION_GAIN of its own; as it is when none is, or when it is not balanced (``hsv``, its Hankel
+    TRUNCATION_GAIN of its own; as it is when none is, or when it is not balanced (``hsv``, its Hankel
     singular values from ``_balanced_hankel_values``, None)."""
     if current.A.shape[0] < 2 or hsv is None:
         return current
@@ -165,7 +147,7 @@ def _truncated(current: Reduced, hsv: np.ndarray | None, validate: Callable[[Red
             continue
         candidate = Reduced(*truncated, np.inf)
         candidate.rms = validate(candidate)
-        if candidate.rms <= current.rms * (1 + _TRUNCATION_GAIN):
+        if candidate.rms <= current.rms * (1 + TRUNCATION_GAIN):
             note = f"balanced truncation {current.A.shape[0]} -> {order}"
             candidate.removed = "; ".join(filter(None, [current.removed, note]))
             return candidate

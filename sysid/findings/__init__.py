@@ -27,10 +27,7 @@ from ..core.thresholds import TRANSIENT_S
 from ..io.recordings import Recording
 from ..validation.compare import Comparison
 
-__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "SPEED_OF_SOUND", "PROVIDERS",
-           "provider", "uses"]
-
-SPEED_OF_SOUND = 343.0  # m/s in air at 20 degC
+__all__ = ["DiagnosisContext", "Finding", "finding", "linear_part", "noise_prediction", "PROVIDERS", "provider", "uses"]
 
 # The shared values' providers by name: provider(ctx) -> value.
 PROVIDERS: dict[str, Callable] = {}

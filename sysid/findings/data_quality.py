@@ -5,49 +5,32 @@ on the ear signal becomes the model's ``output_offset``, and clipped stretches
 (at any level, either channel) are listed in the model's ``excluded`` and left out
 of identification and validation. The better remedy is on the recording side.
 
-A preamplifier flat-tops before mains hum or an engine order couples in, so the ear
-signal is y = clip(x) + h + n: the hum h moves the flat tops by its amplitude and smears
-the histogram spike at the clip level (a 50 Hz hum of 1.2e-3 FS on a preamplifier at
-0.18 FS: no spike, no flat top against the prediction). The lines that the input lacks
-are found in what the model leaves of the ear signals of every recording (a line the
-sweep's response hides in one recording stands out in another; the hum runs through the
-whole session), fitted where the ear signal is below ``LOUD`` of its extreme and taken
-out; what is left, clip(x) + n, piles up at the clip level again (``ear_without_lines``).
+A preamplifier flat-tops before mains hum or an engine order couples in, and the hum smears
+the flat tops: the clipped stretches are read after the session's lines are taken out of the
+ear signals (``sysid.io.clipping``). The lines that the input lacks are found in what the model
+leaves of the ear signals of every recording (a line the sweep's response hides in one recording
+stands out in another; the hum runs through the whole session; ``sysid.io.lines.line_search``).
 That search is the session's one line search in a diagnosis (the shared value
-``session-lines``, ``line_search``): the periodic-disturbance finding judges the lines
-it found on the noise recording.
+``session-lines``): the periodic-disturbance finding judges the lines it found on the noise
+recording.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..core.thresholds import IDENTIFICATION_BAND
+from ..io.clipping import channel_clipping, clipped_spans
 from ..io.corrections import recording_key
-from ..io.data_quality import DC_ABSOLUTE, RAILS_16BIT, clipped_samples, clipped_stretches, dc_offset
-from ..io.lines import find_lines, fit_sinusoids
-from ..io.recordings import Recording
-from ..validation.sweeps import SKIP_S
+from ..io.data_quality import DC_ABSOLUTE, dc_offset
+from ..io.lines import SessionLines, line_search
 from . import DiagnosisContext, finding, noise_prediction, provider, uses
 
-__all__ = ["dc_offset_finding", "clipping_finding", "clipped_stretches_of", "session_lines", "ear_without_lines",
-           "SessionLines", "line_search"]
+__all__ = ["dc_offset_finding", "clipping_finding"]
 
 # The ear offset is read in up to the first LEAD_S of a sweep recording where the input is SILENT
 # (relative to its RMS) or less.
 LEAD_S = 0.5
 SILENT = 0.05
-# Margins around a clipped run left out of identification and validation: an ear sample that
-# clipped spoils itself only; a clipped input misleads the model for its impulse response.
-EAR_MARGIN_S = 0.002
-INPUT_MARGIN_S = 0.02
-# The lines are fitted on the ear samples below LOUD of the extreme: the clipped stretches sit at the
-# extreme, and what the model leaves there is the clipper's error (up to tens of percent of the
-# level), not the hum, which would pull the fit. Half the extreme leaves room for a hum of up to half
-# the clip level.
-LOUD = 0.5
 
 
 def _recordings(ctx: DiagnosisContext):
@@ -98,39 +81,6 @@ def dc_offset_finding(ctx: DiagnosisContext) -> dict:
                    explanation, remedy, {"means_fs": [round(c[2], 8) for c in channels]})
 
 
-@dataclass(frozen=True)
-class SessionLines:
-    """The lines of a session (``line_search``): ``found`` per recording, in the order searched, the
-    ``lines.find_lines`` tuples (frequency Hz, ratio to neighbourhood, RMS level FS) of the lines not
-    found before (in ``known`` or an earlier recording); ``frequencies`` (Hz) all of them with the
-    ``known`` ones, sorted."""
-
-    found: tuple[tuple[tuple[float, float, float], ...], ...]
-    frequencies: tuple[float, ...]
-
-
-def line_search(recordings, predictions, known=()) -> SessionLines:
-    """The lines that the inputs lack in what the model leaves of the ear signals (y minus
-    ``predictions``, the model's predictions without lines, FS), over every recording of a session
-    (``lines.find_lines``); ``known`` (Hz): the model's disturbance, not searched again."""
-    lines = [float(f) for f in known or ()]
-    found = []
-    for recording, predicted in zip(recordings, predictions):
-        n = min(recording.y.size, predicted.size)
-        # Where the ear signal is loud it may be clipped, and what the model leaves there is the clipper's
-        # broadband error (a quarter of the samples clipped buries a 50 Hz hum): searched without them.
-        left = np.where(_quiet(recording.y[:n]), recording.y[:n] - predicted[:n], 0.0)
-        found.append(tuple(find_lines(left, recording.u[:n], recording.fs, IDENTIFICATION_BAND, lines)))
-        lines += [line[0] for line in found[-1]]
-    return SessionLines(tuple(found), tuple(sorted(lines)))
-
-
-def session_lines(recordings, predictions, known=()) -> list[float]:
-    """Frequencies (Hz) of the lines that the inputs lack in what the model leaves of the ear signals,
-    over every recording of a session, with the ``known`` ones (``line_search``)."""
-    return list(line_search(recordings, predictions, known).frequencies)
-
-
 @provider("session-lines")
 def session_line_search(ctx: DiagnosisContext) -> SessionLines:
     """The shared value ``session-lines``: ``line_search`` on the noise recording then the sweeps, the
@@ -140,74 +90,25 @@ def session_line_search(ctx: DiagnosisContext) -> SessionLines:
     return line_search(_recordings(ctx), predictions, ctx.model.disturbance_frequencies)
 
 
-def _quiet(y: np.ndarray) -> np.ndarray:
-    """The samples where |y| is below ``LOUD`` of its largest value: away from any clip level."""
-    level = np.abs(y)
-    return level < LOUD * float(np.max(level, initial=0.0))
-
-
-def ear_without_lines(recording: Recording, predicted: np.ndarray, lines) -> np.ndarray:
-    """The ear signal (FS) with the sinusoids at ``lines`` (Hz) taken out; see the module docstring.
-
-    The sinusoids are the least-squares fit (``lines.fit_sinusoids``) to y - ``predicted`` over the
-    samples where |y| is below ``LOUD`` of its largest value. Samples at the converter's rails keep
-    their value: the converter clips the sum, hum included. Without lines, y itself.
-    """
-    y = recording.y
-    if not lines:
-        return y
-    n = min(y.size, predicted.size)
-    hum = np.zeros(y.size)
-    hum[:n] = fit_sinusoids(y[:n] - predicted[:n], list(lines), recording.fs, keep=_quiet(y[:n]))
-    at_rails = (y <= RAILS_16BIT[0]) | (y >= RAILS_16BIT[1])
-    return np.where(at_rails, y, y - hum)
-
-
-def _channels(recording: Recording, predicted: np.ndarray | None, lines) -> dict[str, tuple]:
-    """{"input" | "ear": (Clipping, margin s)} of one recording; the ear's lines out first when predicted."""
-    ear = ear_without_lines(recording, predicted, lines) if predicted is not None else recording.y
-    return {"input": (clipped_samples(recording.u), INPUT_MARGIN_S),
-            "ear": (clipped_samples(ear, predicted=predicted), EAR_MARGIN_S)}
-
-
-def _stretches(recording: Recording, channels: dict[str, tuple]) -> list[list[float]]:
-    """The channels' clipped runs, each widened by its margin, merged over both channels ([start_s, stop_s])."""
-    mask = np.zeros(recording.u.size, bool)
-    for clipping, margin in channels.values():
-        for start, stop in clipped_stretches(clipping.mask, recording.fs, margin):
-            mask[int(round(start * recording.fs)):int(round(stop * recording.fs))] = True
-    return clipped_stretches(mask, recording.fs, 0.0)
-
-
-def clipped_stretches_of(recording: Recording, predicted: np.ndarray | None = None, lines=()
-                         ) -> tuple[list[list[float]], float]:
-    """Stretches (s) of a recording to leave out for clipping on either channel, and the clipped fraction;
-    ``predicted``: a model's prediction of the ear signal without lines (finds flat tops that noise hides
-    from the histogram); ``lines`` (Hz): the session's lines, taken out of the ear signal first
-    (``ear_without_lines``; needs ``predicted``)."""
-    channels = _channels(recording, predicted, lines)
-    return _stretches(recording, channels), max(clipping.fraction for clipping, _ in channels.values())
-
-
 @uses("noise-prediction", "session-lines")
 def clipping_finding(ctx: DiagnosisContext) -> dict:
     """Clipping at any level on either channel of any recording (``sysid.io.data_quality.clipped_samples``;
     on the ear channel also against the model's prediction, where noise after the clipper hides the
     flat tops from the histogram), after the session's lines are taken out of the ear signals
-    (``ear_without_lines``: a hum added after the clipper smears the flat tops)."""
+    (``sysid.io.clipping.ear_without_lines``: a hum added after the clipper smears the flat tops)."""
     worst, where, levels = 0.0, "", []
     fractions, excluded = {}, {}
     # The predictions without the model's lines: every line is fitted anew on each recording.
     predictions = [noise_prediction(ctx)] + [record["linear"] for record in ctx.comparison.per_sweep]
     lines = list(ctx.value("session-lines").frequencies)
     for recording, predicted in zip(_recordings(ctx), predictions):
-        channels = _channels(recording, predicted, lines)
+        channels = channel_clipping(recording, predicted, lines)
         for label, (clipping, _) in channels.items():
             fractions[f"{recording.path}:{label}"] = clipping.fraction
             if clipping.fraction > worst:
                 worst, where, levels = clipping.fraction, f"{label} channel of {recording.path}", clipping.levels
         # The stretches come from the same masks: a recording without a clipped sample has none.
-        spans = _stretches(recording, channels)
+        spans = clipped_spans(recording, channels)
         if spans:
             excluded[recording_key(recording)] = spans
     already = bool(ctx.model.excluded) and all(ctx.model.excluded.get(k) for k in excluded)

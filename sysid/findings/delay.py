@@ -7,7 +7,9 @@ minimum of that cost at d > current delay; 1 sample is 22.7 us or 0.78 cm of sou
 path at 44.1 kHz. A short delay moves that cost little; when the scan is not
 decisive, quick output-error refits with and without the delay are compared on
 the sweeps; when the model's poles are bent to mimic the delay (the scan is flat),
-a scan with a generic pole set proposes the delay to try.
+a scan with a generic pole set proposes the delay to try. Both scans are the delay's
+rules (``sysid.estimation.delay.fixed_pole_scan``, ``generic_pole_scan``); the coarse
+scan at the model's poles is the shared value ``delay-scan``, which the report draws.
 """
 
 from __future__ import annotations
@@ -16,16 +18,17 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..core import lti
-from ..core.thresholds import EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG
-from ..estimation.output_error import BlockData, block_data, linear_cost, refine_output_error
+from ..core.thresholds import (EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG,
+                               MAX_EXTRA_DELAY)
+from ..estimation.delay import delay_centimetres, fixed_pole_scan, generic_pole_scan
+from ..estimation.output_error import BlockData, block_data, refine_output_error
 from ..io.recordings import Recording
 from ..validation.sweeps import VALIDATION_BAND, rms_from_responses, sweep_spectrum
-from . import SPEED_OF_SOUND, DiagnosisContext, finding, provider, uses
+from . import DiagnosisContext, finding, provider, uses
 from .dynamics import arbitrate, series_factor_finding
 
-__all__ = ["delay_finding", "scan_delay", "refit_rms", "MAX_EXTRA_DELAY"]
+__all__ = ["delay_finding", "scan_delay", "generic_scan", "refit_rms"]
 
-MAX_EXTRA_DELAY = 120
 # The best delay must lower the fixed-pole cost by this factor, and the model must be
 # this far above the noise floor, before a delay is called missing.
 COST_RATIO = 1.05
@@ -84,52 +87,30 @@ def confirm_delay(ctx: DiagnosisContext, totals) -> dict[int, float]:
 
 
 def generic_scan(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY) -> int:
-    """Best total delay with a fixed generic pole set instead of the model's poles.
-
-    Second-order modes with Q = 2 at 12 log-spaced frequencies from 30 Hz to 4.5 kHz
-    (and two slow real poles) describe any smooth path response but no delay, so the
-    cost's minimum over d marks the delay even when the model's own poles, bent to
-    mimic the delay, make the fixed-pole scan flat. Coarse steps of 2, then +-1.
-    """
-    model = ctx.model
-    f0 = np.geomspace(30.0, 4500.0, 12)
-    upper = np.exp(-np.pi * f0 / (2.0 * ctx.fs)) * np.exp(2j * np.pi * f0 / ctx.fs)
-    A = lti.real_block_diagonal(np.concatenate([upper, np.conj(upper), [0.9, 0.99]]))
-    data = ctx.value("delay-scan-data")
-    with threadpool_limits(limits=1, user_api="blas"):
-        coarse = {d: linear_cost(A, data, d) for d in range(model.delay, model.delay + max_extra + 1, 2)}
-        centre = min(coarse, key=coarse.get)
-        fine = {d: coarse.get(d) or linear_cost(A, data, d) for d in range(max(centre - 1, model.delay), centre + 2)}
-    return min(fine, key=fine.get)
+    """Best total delay with a fixed generic pole set instead of the model's poles
+    (``sysid.estimation.delay.generic_pole_scan`` on the scan data)."""
+    return generic_pole_scan(ctx.value("delay-scan-data"), ctx.fs, ctx.model.delay, max_extra)
 
 
 def scan_delay(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY, coarse: bool = False) -> tuple[int, np.ndarray]:
-    """(best total delay, cost per total delay 0..current+max_extra).
-
-    ``coarse``: every second delay (and the model's own), then the neighbours of the best
-    (as ``generic_scan``); the delays not evaluated hold NaN. The cost falls over a few
-    samples towards a missing delay, so the step of 2 still lands next to its minimum.
-    """
-    model = ctx.model
-    data = ctx.value("delay-scan-data")
-    delays = np.arange(0, model.delay + max_extra + 1)
-    costs = np.full(delays.size, np.nan)
-    with threadpool_limits(limits=1, user_api="blas"):
-        first = sorted(set(range(0, delays.size, 2)) | {model.delay}) if coarse else range(delays.size)
-        for d in first:
-            costs[d] = linear_cost(model.A, data, int(d))
-        if coarse:
-            centre = int(np.nanargmin(costs))
-            for d in range(max(centre - 1, 0), min(centre + 2, delays.size)):
-                if np.isnan(costs[d]):
-                    costs[d] = linear_cost(model.A, data, int(d))
-    return int(delays[np.nanargmin(costs)]), costs
+    """(best total delay, cost per total delay 0..current+max_extra) at the model's poles on the scan data
+    (``sysid.estimation.delay.fixed_pole_scan``; ``coarse``: every second delay and the neighbours of the best,
+    NaN where not evaluated)."""
+    return fixed_pole_scan(ctx.model.A, ctx.value("delay-scan-data"), ctx.model.delay, max_extra, coarse)
 
 
-@uses("delay-scan-data", "delay-sweep-spectra", "sweep-bins")
+@provider("delay-scan")
+def _coarse_scan(ctx: DiagnosisContext) -> tuple[int, np.ndarray]:
+    """The shared value ``delay-scan``: (best total delay, fixed-pole cost per total delay 0..model.delay +
+    ``MAX_EXTRA_DELAY``, NaN where the coarse scan did not evaluate), ``scan_delay(ctx, coarse=True)``: what the
+    finding decides from and the report draws."""
+    return scan_delay(ctx, coarse=True)
+
+
+@uses("delay-scan", "delay-scan-data", "delay-sweep-spectra", "sweep-bins")
 def delay_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
-    best, costs = scan_delay(ctx, coarse=True)
+    best, costs = ctx.value("delay-scan")
     extra = best - model.delay
     ratio = float(costs[model.delay] / costs[best])
     # A model at the noise floor needs no delay, unless the scan is unambiguous (the floor
@@ -157,7 +138,7 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
     microseconds = 1e6 * extra / model.fs
     # Excess phase of the missing delay at the top of the validation band (effects.md: linear in f).
     excess_phase = 360.0 * VALIDATION_BAND[1] * max(extra, 0) / model.fs
-    centimetres = 100.0 * SPEED_OF_SOUND * extra / model.fs
+    centimetres = delay_centimetres(extra, model.fs)
     if extra >= 1:
         explanation = (f"the model fits best with {extra} more sample(s) of delay ({microseconds:.0f} us): about "
                        f"{centimetres:.1f} cm of sound path or converter latency; without it the fit needs spurious "

@@ -2,8 +2,8 @@
 
 Asked last, when the model is above the noise floor and no named effect explains
 it: one more mode (2 states), started at the third-octave band worst against the
-noise floor, is fitted together with the model's own poles by a quick output-error
-refit (``sysid.findings.delay.refit_rms``). If that lowers the validation rms by
+noise floor (``sysid.validation.compare.worst_bands``), is fitted together with the model's
+own poles by a quick output-error refit (``sysid.findings.delay.refit_rms``). If that lowers the validation rms by
 ``GAIN`` the model is under-modelled: a nominal-order fit of a path with an extra
 resonance or filter takes it in and gives up a weaker mode, and the error is then
 spread over a band rather than shaped like any one factor.
@@ -11,27 +11,16 @@ spread over a band rather than shaped like any one factor.
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..core.structures import mode_block, with_states
 from ..core.thresholds import EXCESS, EXPLAINS_GAIN, UNDER_MODELLED_EXCESS
-from ..validation.compare import Comparison
-from ..validation.sweeps import VALIDATION_BAND
+from ..validation.compare import START_Q, worst_bands
 from . import DiagnosisContext, finding, uses
 from .delay import refit_rms
 
-__all__ = ["under_modelled_finding", "worst_bands", "START_Q"]
+__all__ = ["under_modelled_finding"]
 
 GAIN = EXPLAINS_GAIN
 NO_IN_BAND_ERROR = ("dc-offset", "time-variation")
-START_Q = 3.0
-
-
-def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
-    """The third-octave bands (rows of the comparison's table) in the validation band with the
-    largest error over noise, worst first."""
-    rows = [r for r in comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= VALIDATION_BAND[1]]
-    return sorted(rows, key=lambda r: -r["ratio"])[:count]
 
 
 @uses("delay-scan-data", "delay-sweep-spectra")

@@ -38,9 +38,15 @@ same way, with the functions here.
   "Estimation of nonparametric noise and FRF models for multivariable systems, part I",
   Mechanical Systems and Signal Processing 24(3), 2010). The line's amplitudes come from that
   joint fit and only the line is taken out.
+- ``line_search``: the lines of a whole session (the noise recording and the sweeps) in what a
+  model leaves of each ear signal, where the ear signal is below ``LOUD`` of its extreme (a clipped
+  stretch's misfit is broadband): the diagnosis's one line search, and the lines the clipping
+  correction takes out before it looks for flat tops.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.ndimage
@@ -48,8 +54,9 @@ import scipy.ndimage
 from ..core.thresholds import IDENTIFICATION_BAND, LINE_RATIO
 from .recordings import Recording
 
-__all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "RESPONSE_WINDOW", "DRIVEN_WINDOW", "find_lines", "driven",
-           "undriven_lines", "line_regressor", "fit_sinusoids", "response_lines", "without_lines"]
+__all__ = ["LINE_RATIO", "MAX_LINES", "NEIGHBOURHOOD_HZ", "RESPONSE_WINDOW", "DRIVEN_WINDOW", "LOUD", "find_lines",
+           "driven", "undriven_lines", "line_regressor", "fit_sinusoids", "response_lines", "without_lines",
+           "quiet_samples", "SessionLines", "line_search", "session_lines"]
 
 MAX_LINES = 12
 NEIGHBOURHOOD_HZ = 20.0
@@ -62,6 +69,11 @@ RESPONSE_WINDOW = 5
 DRIVEN_WINDOW = 10
 # fit_sinusoids: samples per block of the regressor (8192 x 4 columns x 8 bytes per line: in cache).
 FIT_BLOCK = 8192
+# The lines are fitted on the ear samples below LOUD of the extreme: the clipped stretches sit at the
+# extreme, and what the model leaves there is the clipper's error (up to tens of percent of the
+# level), not the hum, which would pull the fit. Half the extreme leaves room for a hum of up to half
+# the clip level.
+LOUD = 0.5
 
 
 def find_lines(x: np.ndarray, u: np.ndarray, fs: float, band=IDENTIFICATION_BAND, known=()) -> list[tuple[float, float, float]]:
@@ -257,3 +269,42 @@ def without_lines(recording: Recording, frequencies) -> Recording:
         return recording
     y = recording.y - response_lines(recording.u, recording.y, frequencies, recording.fs)
     return Recording(recording.u, y, recording.fs, recording.path, recording.clipped_fraction, recording.dc_offset)
+
+
+def quiet_samples(y: np.ndarray) -> np.ndarray:
+    """The samples where |y| is below ``LOUD`` of its largest value: away from any clip level."""
+    level = np.abs(y)
+    return level < LOUD * float(np.max(level, initial=0.0))
+
+
+@dataclass(frozen=True)
+class SessionLines:
+    """The lines of a session (``line_search``): ``found`` per recording, in the order searched, the
+    ``find_lines`` tuples (frequency Hz, ratio to neighbourhood, RMS level FS) of the lines not
+    found before (in ``known`` or an earlier recording); ``frequencies`` (Hz) all of them with the
+    ``known`` ones, sorted."""
+
+    found: tuple[tuple[tuple[float, float, float], ...], ...]
+    frequencies: tuple[float, ...]
+
+
+def line_search(recordings, predictions, known=()) -> SessionLines:
+    """The lines that the inputs lack in what the model leaves of the ear signals (y minus
+    ``predictions``, the model's predictions without lines, FS), over every recording of a session
+    (``find_lines``); ``known`` (Hz): the model's disturbance, not searched again."""
+    lines = [float(f) for f in known or ()]
+    found = []
+    for recording, predicted in zip(recordings, predictions):
+        n = min(recording.y.size, predicted.size)
+        # Where the ear signal is loud it may be clipped, and what the model leaves there is the clipper's
+        # broadband error (a quarter of the samples clipped buries a 50 Hz hum): searched without them.
+        left = np.where(quiet_samples(recording.y[:n]), recording.y[:n] - predicted[:n], 0.0)
+        found.append(tuple(find_lines(left, recording.u[:n], recording.fs, IDENTIFICATION_BAND, lines)))
+        lines += [line[0] for line in found[-1]]
+    return SessionLines(tuple(found), tuple(sorted(lines)))
+
+
+def session_lines(recordings, predictions, known=()) -> list[float]:
+    """Frequencies (Hz) of the lines that the inputs lack in what the model leaves of the ear signals,
+    over every recording of a session, with the ``known`` ones (``line_search``)."""
+    return list(line_search(recordings, predictions, known).frequencies)

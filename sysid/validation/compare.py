@@ -35,10 +35,14 @@ from ..io.recordings import Recording, check_same_rate
 from .sweeps import (SKIP_S, VALIDATION_BAND, aligned_ears, band_energy, band_rms, check_repeats, noise_floor,
                      repeat_lag, validation_start)
 
-__all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "LAGS", "BOUND_99"]
+__all__ = ["Comparison", "compare", "format_comparison", "third_octave_bands", "worst_bands", "LAGS", "BOUND_99",
+           "START_Q"]
 
 LAGS = 25
 BOUND_99 = 2.58
+# Quality factor of a mode started at a worst band (``worst_bands``): the under-modelled finding's
+# trial mode and the start of ``refine --add under-modelled``'s modes.
+START_Q = 3.0
 
 
 def third_octave_bands(low: float = 20.0, high: float = 5000.0) -> list[tuple[float, float, float]]:
@@ -238,6 +242,13 @@ def _band_table(tails, repeats, fs, lag) -> list[dict]:
         rows.append({"center_hz": center, "low_hz": low, "high_hz": high, "error_rms": error, "noise_rms": noise,
                      "ratio": error / noise if noise > 0 else float("inf")})
     return rows
+
+
+def worst_bands(comparison: Comparison, count: int = 1) -> list[dict]:
+    """The third-octave bands (rows of the comparison's table) in the validation band with the
+    largest error over noise, worst first."""
+    rows = [r for r in comparison.bands if np.isfinite(r["ratio"]) and r["center_hz"] <= VALIDATION_BAND[1]]
+    return sorted(rows, key=lambda r: -r["ratio"])[:count]
 
 
 def format_comparison(comparison: Comparison, name: str = "model") -> str:

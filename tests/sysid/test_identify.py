@@ -80,23 +80,6 @@ def test_gamma_beyond_half_segment_is_rejected(sessions):
         identify(session.noise, session.sweeps, "ff", IdentificationOptions(gammas=(2000,)))
 
 
-def test_freed_pole_dropped_is_the_out_of_band_one_nearest_the_unit_circle():
-    import importlib
-
-    module = importlib.import_module("sysid.identify")
-    fs = 48000.0
-    mode = 0.99 * np.exp(2j * np.pi * 1000.0 / fs)  # 1 kHz, in band
-    high_pass = np.exp(-2 * np.pi * 5.0 / fs)  # 5 Hz coupling corner, out of band
-    freed = 1 - 1e-9  # run to z = 1
-    poles = np.array([mode, np.conj(mode), high_pass, freed, 0.3])
-    kept = module._without_freed_pole(poles, (20.0, 5000.0), fs)
-    assert sorted(np.round(np.abs(kept), 9)) == sorted(np.round(np.abs([mode, mode, high_pass, 0.3]), 9))
-    # A pair out of band goes with its conjugate; nothing out of band: nothing to drop.
-    pair = 0.999 * np.exp(2j * np.pi * 10.0 / fs)
-    assert module._without_freed_pole(np.array([mode, np.conj(mode), pair, np.conj(pair)]), (20.0, 5000.0), fs).size == 2
-    assert module._without_freed_pole(np.array([mode, np.conj(mode)]), (20.0, 5000.0), fs) is None
-
-
 def test_a_delay_decided_one_sample_long_is_tried_one_shorter(monkeypatch):
     # Random helmet 94 (short session; a 1.2 kHz mode of Q 0.85, a 75 Hz high-pass, pure delay 19): the onset
     # reads 23, and the costs at the picked core barely tell 19 from 20, so the decision may land on 20 by
@@ -107,7 +90,7 @@ def test_a_delay_decided_one_sample_long_is_tried_one_shorter(monkeypatch):
     from sysid.estimation.delay import DelayWalk, decide_delay
     from sysid.random_plant import random_plant, random_session
 
-    identify_module = sys.modules["sysid.identify"]
+    trials = sys.modules["sysid.estimation.delay.trials"]
     plant = random_plant(94)
     session = random_session(94, noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
     decided, moves = [], []
@@ -121,12 +104,21 @@ def test_a_delay_decided_one_sample_long_is_tried_one_shorter(monkeypatch):
         moves.append(samples)
         return compensate_delay(recording, samples)
 
-    compensate_delay = identify_module.compensate_delay
-    monkeypatch.setattr(identify_module, "decide_delay", one_sample_long)
-    monkeypatch.setattr(identify_module, "compensate_delay", recorded)
+    compensate_delay = trials.compensate_delay
+    monkeypatch.setattr(trials, "decide_delay", one_sample_long)
+    monkeypatch.setattr(trials, "compensate_delay", recorded)
     model = identify(session.noise, session.sweeps, "fb", IdentificationOptions(gammas=tuple(range(10, 1001, 30)))).model
     onset = decided[0]
     assert onset > plant.delay + 1  # read long
     tried = {onset + m for m in moves if m < 0}
     assert {plant.delay + 1, plant.delay} <= tried
     assert model.delay in (plant.delay, plant.delay + 1)
+
+
+def test_the_start_gamma_is_the_grid_gamma_the_pick_descends_from(identifications):
+    # The refinement's start_gamma is data on the pick (``OrderCandidate.gamma``), not read back from its label:
+    # a pick from a ``grid gamma=G`` start says G, whatever was done to it since.
+    for result in identifications.values():
+        refinement = result.model.identification.get("refinement", {})
+        if refinement.get("start", "").startswith("grid gamma="):
+            assert refinement["start_gamma"] == int(refinement["start"].split("=")[1].split(",")[0])

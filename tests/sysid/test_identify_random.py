@@ -20,7 +20,7 @@ OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
 # samples, Q up to 50 (61, 22, 28), modes down to 35 Hz, 44.1 and 48 kHz; two whose delay a
 # 4-sample search at the picked order missed (30: the onset 10 samples short, found by the
 # 12-sample search; 49: 3 short, where with the benchmark's grid the picked core's fixed-pole
-# cost dips back near the true delay and only refitted poles tell, latency.refine_delay).
+# cost dips back near the true delay and only refitted poles tell, sysid.estimation.delay.refine_delay).
 # All 20 pass at 6f37370: 88 s of wall time in all on 2 cores at load average 2-4 (39: 9.8 s,
 # 28: 9.4 s, 31: 8.7 s; 44 and 85: 1.1 s).
 DEFAULT_SEEDS = (3, 11, 18, 22, 29, 32, 34, 36, 38, 39, 30, 49, 28, 31, 97, 61, 75, 85, 44, 35)

@@ -254,7 +254,7 @@ def test_excluded_stretches_are_filled_with_the_models_prediction():
     # Identification on a model with excluded stretches sees the model's own prediction there
     # (missing data), the measured samples everywhere else; nothing is cut out.
     from sysid.io.corrections import excluded_mask
-    from sysid.refits import _prepared
+    from sysid.refits.machinery import _prepared
     session, model = effect_case("ff", 5, ())
     sweep = session.sweeps[0]
     excluded = {Path(sweep.path).name: [[0.5, 0.6], [1.0, 1.01]]}
@@ -267,7 +267,7 @@ def test_excluded_stretches_are_filled_with_the_models_prediction():
 
 
 def test_a_refit_whose_warm_start_reaches_the_floor_skips_the_re_identification():
-    from sysid.refits import WARM_ENOUGH, _refit
+    from sysid.refits.machinery import WARM_ENOUGH, _refit
     session, model = effect_case("ff", 5, ())
     assert compare(model, session.sweeps).ratio <= WARM_ENOUGH
 

@@ -6,8 +6,9 @@ import scipy.signal
 from effect_sessions import TEST_REFIT, effect_case
 
 from sysid.diagnose import diagnose, format_findings
-from sysid.findings.data_quality import clipped_stretches_of, ear_without_lines, session_lines
+from sysid.io.clipping import clipped_stretches_of, ear_without_lines
 from sysid.io.data_quality import clipped_against_prediction, clipped_samples, clipped_stretches
+from sysid.io.lines import session_lines
 from sysid.io.recordings import Recording
 from sysid.refine import format_refinement, refine, refine_auto
 from sysid.validation.compare import compare

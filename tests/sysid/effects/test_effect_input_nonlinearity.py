@@ -7,7 +7,8 @@ from effect_units import true_context
 
 from sysid.core.model import Model
 from sysid.findings import DiagnosisContext
-from sysid.findings.nonlinearity import nonlinearity_finding, polynomial_columns
+from sysid.estimation.input_polynomial import polynomial_columns
+from sysid.findings.nonlinearity import nonlinearity_finding
 from sysid.random_plant import random_session
 from sysid.validation.compare import compare
 

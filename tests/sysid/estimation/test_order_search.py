@@ -15,9 +15,11 @@ import scipy.signal
 
 from sysid.core import lti
 from sysid.core.model import MAX_COEFFICIENT, Model
+from sysid.core.thresholds import START_REAL_POLES, START_SEPARATION
 from sysid.estimation import order_search
 from sysid.estimation.order_search import (OrderCandidate, _insert_modes, _pair, block_at_noise, distinct_start,
-                                           sweep_rms)
+                                           sweep_rms, without_freed_pole)
+from sysid.estimation.subspace import SubspaceDecomposition
 from sysid.estimation.output_error import at_radius_bound, block_data, decay_bound, linear_cost, refine_output_error
 from sysid.io.recordings import Recording
 from sysid.validation.sweeps import sweep_spectrum
@@ -172,11 +174,11 @@ def test_coinciding_and_bound_starting_poles_are_replaced_by_distinct_real_poles
     degenerate = np.concatenate([_PAIR_500, [0.5, 0.5, 0.0, 0.0, bound]])
     start = distinct_start(degenerate, block, feedthrough=False, added=1)
     assert start.size == degenerate.size + 1
-    assert _min_distance(start) >= order_search._SEPARATION
+    assert _min_distance(start) >= START_SEPARATION
     assert not at_radius_bound(start, block)
     # The pair and the first of each coinciding group stay; the replacements are real poles.
     np.testing.assert_array_equal(start[:4], np.concatenate([_PAIR_500, [0.5, 0.0]]))
-    assert np.all(start[4:].imag == 0) and set(start[4:].real) <= set(order_search._REAL_POLES)
+    assert np.all(start[4:].imag == 0) and set(start[4:].real) <= set(START_REAL_POLES)
 
 
 def test_a_start_without_degenerate_poles_is_kept_and_takes_the_added_pole_at_one_half():
@@ -191,8 +193,36 @@ def test_a_model_holding_one_half_gets_another_real_pole_and_refines_to_the_trut
     # pole 0.5: the new pole goes elsewhere, and the refinement reaches the true poles' cost.
     A_true, block = _real_pole_block()
     start = distinct_start(np.concatenate([_PAIR_500, [0.5]]), block, feedthrough=False, added=1)
-    assert start.size == 4 and _min_distance(start) >= order_search._SEPARATION
+    assert start.size == 4 and _min_distance(start) >= START_SEPARATION
     fit = refine_output_error(lti.real_block_diagonal(start), np.zeros((4, 1)), np.zeros((1, 4)), np.zeros((1, 1)),
                               block, max_iterations=20, noise_tolerance=True)
     assert fit.cost_after <= 1.001 * linear_cost(A_true, block)
     np.testing.assert_allclose(np.sort(np.linalg.eigvals(fit.A).real)[:2], [0.3, 0.9], atol=1e-3)
+
+
+def test_candidates_carry_the_grid_gamma_of_their_start():
+    # Smoothed-FRF decompositions at two widths (here of the true response): a candidate refined from a
+    # ``grid gamma=G`` start carries G as data (identify's provenance reads it there), the others none.
+    block, sweeps, floor, _ = _insertion_case()
+    A, B, C, D = _two_mode_plant()
+    omega = 2 * np.pi * np.linspace(20.0, 5000.0, 300) / FS
+    g = lti.frequency_response(A, B, C, D, np.exp(1j * omega))
+    decompositions = {gamma: SubspaceDecomposition(omega, g, q=10) for gamma in (30, 100)}
+    candidates = order_search.search_orders(block, sweeps, decompositions, {4: 100}, range(1, 5), floor)
+    for c in candidates:
+        assert c.gamma == (int(c.start.split("=")[1]) if c.start.startswith("grid gamma=") else None)
+    assert any(c.gamma is not None for c in candidates)
+
+
+def test_freed_pole_dropped_is_the_out_of_band_one_nearest_the_unit_circle():
+    fs = 48000.0
+    mode = 0.99 * np.exp(2j * np.pi * 1000.0 / fs)  # 1 kHz, in band
+    high_pass = np.exp(-2 * np.pi * 5.0 / fs)  # 5 Hz coupling corner, out of band
+    freed = 1 - 1e-9  # run to z = 1
+    poles = np.array([mode, np.conj(mode), high_pass, freed, 0.3])
+    kept = without_freed_pole(poles, (20.0, 5000.0), fs)
+    assert sorted(np.round(np.abs(kept), 9)) == sorted(np.round(np.abs([mode, mode, high_pass, 0.3]), 9))
+    # A pair out of band goes with its conjugate; nothing out of band: nothing to drop.
+    pair = 0.999 * np.exp(2j * np.pi * 10.0 / fs)
+    assert without_freed_pole(np.array([mode, np.conj(mode), pair, np.conj(pair)]), (20.0, 5000.0), fs).size == 2
+    assert without_freed_pole(np.array([mode, np.conj(mode)]), (20.0, 5000.0), fs) is None

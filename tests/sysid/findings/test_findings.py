@@ -11,7 +11,7 @@ from sysid.core.model import Model
 from sysid.diagnose import diagnose
 from sysid.effects import Effect
 from sysid.findings import PROVIDERS, DiagnosisContext, finding, uses
-from sysid.findings.data_quality import line_search
+from sysid.io.lines import line_search
 from sysid.validation.compare import compare
 
 HUM = ("periodic-disturbance:50,3,1e-3",)
