@@ -9,6 +9,9 @@ by ||G - G_r||_inf <= 2 sum_{i>r} sigma_i (Enns' bound).
 Re-discretisation goes through continuous time assuming a zero-order hold:
 [[A, B], [0, 1]] = expm([[Ac, Bc], [0, 0]] T), so (Ac, Bc) come from the matrix
 logarithm and the board-rate model from the matrix exponential at the new period.
+
+Below the steps of firmware generation: the first design module the plan
+(:mod:`codegen.plan`) runs; it imports only ``sysid.core`` and the errors.
 """
 
 from __future__ import annotations
