@@ -19,6 +19,8 @@ import scipy.signal
 from sysid.core.model import Model
 
 from .controller import Controller, StateSpaceFilter
+from .design import predict
+from .disturbance import default_disturbance, synthesize
 from .prediction import BANDS
 
 __all__ = ["ClosedLoopRun", "run_closed_loop", "closed_loop_poles", "measured_attenuation"]
@@ -81,6 +83,7 @@ def run_closed_loop(controller: Controller, s_true: Model, d: np.ndarray, x: np.
 
 def closed_loop_poles(controller: Controller, s_true: Model) -> np.ndarray:
     """Poles of the loop y = z^-L Q d_hat, d_hat = d + (S_true - S_model) y (empty without Q)."""
+    # python-control takes about a second to import; only this verdict needs it.
     import control
 
     if controller.fb is None:
@@ -135,8 +138,6 @@ def verify(controller: Controller, limit: Controller, s_true: Model, p_true: Mod
     The disturbance is synthesised from ``disturbance`` (``anc.disturbance.synthesize``) with
     d = P_true x + u when there is a reference.
     """
-    from .disturbance import synthesize
-
     fs = s_true.fs
     x, u = synthesize(disturbance, int(round(seconds * fs)), fs, seed)
     d = u if x is None else p_true.simulate(x) + u
@@ -162,9 +163,6 @@ def predicted_and_achieved(controller: Controller, s_true: Model, p_true: Model 
     controller's internal model (``anc.design.predict``), achieved sample by sample on ``s_true``
     (and ``p_true`` for the reference path). ``disturbance`` defaults to the documented default
     with ``p_true``; without ``p_true`` there is no reference and only "fb" is returned."""
-    from .design import predict
-    from .disturbance import default_disturbance, synthesize
-
     fs = s_true.fs
     disturbance = disturbance or default_disturbance(fs, p_true)
     if p_true is None and disturbance.has_reference:

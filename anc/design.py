@@ -3,10 +3,10 @@
 Order of the steps: (1) the uncertainty of S_model (``anc.uncertainty``); (2) the robust IMC
 feedback filter Q (``anc.feedback``) for the ear disturbance; (3) the feed-forward filter W
 (``anc.feedforward``) for what the feedback leaves of the reference-coherent noise;
-(4) both filters as balanced state-space realisations (``codegen.realise``), truncated to the
-lowest order that keeps the design (``_lowest_order``): Q first, then W with that Q; (5)
-predictions per band (``anc.prediction``) for W alone, Q alone and both, made with the filters
-as stored.
+(4) both filters as balanced state-space realisations
+(``sysid.core.lti.minimal_balanced_realisation``), truncated to the lowest order that keeps the
+design (``_lowest_order``): Q first, then W with that Q; (5) predictions per band
+(``anc.prediction``) for W alone, Q alone and both, made with the filters as stored.
 
 Refused: an FB model with a pole within ``UNDAMPED_MARGIN`` (1e-6) of the unit circle other
 than a real one at DC (an identification defect; see the constant). Robustness between grid points: the stored Q's
@@ -35,8 +35,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from codegen.realise import balanced_realisation
 from sysid.core.errors import HelmetAncError
+from sysid.core.lti import minimal_balanced_realisation
 from sysid.core.model import Model
 from sysid.core.structures import series, tf_to_statespace
 
@@ -109,7 +109,7 @@ def undamped_pole(model: Model) -> tuple[float, float] | None:
 def _laguerre_order(basis: LaguerreBasis, coefficients: np.ndarray) -> int:
     """States of the Laguerre sum kept at full order: Hankel singular values above 1e-9 of the largest."""
     A, B, C, _ = LaguerreBasis(basis.pole, basis.order).statespace(coefficients)
-    hsv = balanced_realisation(A, B, C, np.zeros((1, 1)))[4]
+    hsv = minimal_balanced_realisation(A, B, C, np.zeros((1, 1))).hankel_singular_values
     return int(np.sum(hsv > 1e-9 * hsv[0])) if hsv.size and hsv[0] > 0 else 0
 
 
@@ -117,12 +117,12 @@ def _balanced(basis: LaguerreBasis, coefficients: np.ndarray, order: int) -> Sta
     """Balanced realisation of c_0 + sum c_i L_i truncated to ``order`` states, times the basis's DC
     block if it has one (in series, its two states added; the whole balanced again, untruncated)."""
     A, B, C, D = LaguerreBasis(basis.pole, basis.order).statespace(coefficients)
-    Ab, Bb, Cb, Db, _ = balanced_realisation(A, B, C, D, order=order)
-    system = (Ab, Bb, Cb, np.array([[Db]]))
+    balanced = minimal_balanced_realisation(A, B, C, D, order=order)
+    system = (balanced.A, balanced.B, balanced.C, np.array([[balanced.D]]))
     if basis.highpass_pole is not None:
         system = series(system, tf_to_statespace(*basis._highpass()))
-        Ab, Bb, Cb, Db, _ = balanced_realisation(*system)
-        system = (Ab, Bb, Cb, np.array([[Db]]))
+        balanced = minimal_balanced_realisation(*system)
+        system = (balanced.A, balanced.B, balanced.C, np.array([[balanced.D]]))
     return StateSpaceFilter(*system)
 
 

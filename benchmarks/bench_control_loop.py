@@ -33,8 +33,9 @@ from anc.closed_loop import measured_attenuation, run_closed_loop  # noqa: E402
 from anc.controller import Controller  # noqa: E402
 from anc.disturbance import default_disturbance, synthesize  # noqa: E402
 from anc.prediction import band_centres  # noqa: E402
+from codegen.api import generate_controller_firmware  # noqa: E402
 from codegen.control_loop import board_loop  # noqa: E402
-from codegen.controller import generate_controller_firmware, plan_controller  # noqa: E402
+from codegen.controller import plan_controller  # noqa: E402
 from codegen.qemu_cost import M4_CFLAGS, build_m4_elf, count_regions, per_sample_cost, per_sample_function_cost
 from codegen.reference import to_q15  # noqa: E402
 from sysid.core.plants import appendix_a_model  # noqa: E402

@@ -1,22 +1,36 @@
 """Firmware generation: identified helmet-anc models -> verified C filter code.
 
-The pipeline (design reference, "Firmware generation"):
+The steps flow one way, each importing only those before it (as acados' template
+code generation): plan -> context (plain data) -> render -> build -> verify ->
+manifest; ``api`` alone joins them. Below the steps (design reference, "Firmware
+generation"):
 
-``realise``     balanced realisation, truncation, re-discretisation to the board rate;
+``errors``      the exceptions; ``c_syntax`` identifiers, comment text and C literals;
+``realise``     balanced realisation (``sysid.core.lti``), truncation, re-discretisation
+                to the board rate;
 ``sections``    second-order sections: pairing, ordering, relative degree, scaling;
 ``fixedpoint``  Q15/Q31 design with per-section exponents; ``float32`` its float twin;
+``reference``   bit-exact fixed-point, float32 and float64 Python references;
 ``cmsis``       tables and Python models of CMSIS-DSP's biquad kernels;
 ``noise``       predicted round-off noise, coefficient error and overflow margins;
-``targets``     the registry of kinds of generated code (generic Q15/float32, cmsis) and
-                what each needs: designs, references, templates, host runner, manifest;
-``plan``        all of the above for one model, with the refusals;
-``reference``   bit-exact fixed-point, float32 and float64 Python references;
-``render``      jinja2 templates (``codegen.templates``) and atomic output directories;
-``build``       cffi host builds cached by source hash; ``verify`` the C against the references;
-``qemu_cost``   instructions per sample of the real Cortex-M4 ELF, counted on QEMU;
-``controller``  a controller JSON (``anc``) -> C of its S, Q and W for the board's control path;
-``control_loop`` the control path's sample-by-sample Python twin (fixed point and float32);
-``api`` the Python front end (``generate_firmware``); the command line is ``helmet_anc``.
+``targets``     the kinds of generated code (generic Q15/float32, cmsis): one Target each,
+                with what it needs (designs, references, templates, host runner, formats).
+
+The steps:
+
+``plan``        all of the above for one model, with the refusals; ``controller`` the
+                plans of a controller's S, Q and W (reads ``anc.controller``);
+``context``     the plan as the plain dictionary the templates render;
+``render``      the jinja2 templates (``codegen.templates``);
+``build``       cffi host builds cached by source hash, and the cmsisdsp package's kernels;
+``verify``      the C on the host against the references, on sweeps (the one reader of WAVs);
+``manifest``    the manifest beside the code and the output folder it vouches for;
+``api``         the entry points (``generate_firmware``, ``generate_controller_firmware``)
+                of both command lines (``helmet_anc``).
+
+Beside them: ``qemu_cost`` counts instructions per sample of the real Cortex-M4 ELF on
+QEMU; ``control_loop`` is the control path's sample-by-sample Python twin (fixed point
+and float32).
 """
 
 __all__ = ["__version__"]

@@ -1,136 +1,32 @@
 """Python entry points of firmware generation (used by both command-line front ends).
 
+The one module that joins the steps (plan -> context -> render -> build -> verify ->
+manifest; each imports only those before it):
 :func:`generate_firmware` designs, renders, optionally verifies, and writes
-``NAME_filter.h``, ``NAME_filter.c`` and ``manifest.json`` into ``outdir`` atomically.
+``NAME_filter.h``, ``NAME_filter.c`` and ``manifest.json`` into ``outdir`` atomically;
+:func:`generate_controller_firmware` does the same for a controller's filters
+(:mod:`codegen.controller`) and its ``controller_config.h``.
 :func:`format_verification_table` prints the verification figures of a manifest.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from sysid.core.files import OutputRefused, check_output_directory
 from sysid.core.model import Model
 
-from . import __version__, noise
-from .errors import CodegenError, OutputError
-from .plan import Plan, plan_firmware
-from .render import build_context, render_files, validate_name, write_directory
-from .verify import verify_host
+from .build import host_filter
+from .c_syntax import validate_name
+from .context import build_context, controller_config_context
+from .controller import CONTROL_BLOCK_MAX, FILTER_NAMES, plan_controller
+from .manifest import (MANIFEST_FORMAT, Manifest, check_output, json_ready, manifest_data, manifest_text,
+                       write_directory)
+from .plan import plan_firmware
+from .render import render_files, render_template
+from .verify import load_sweeps, verify_host
 
-__all__ = ["MANIFEST_FORMAT", "Manifest", "format_verification_table", "generate_firmware", "load_sweeps"]
-
-MANIFEST_FORMAT = "helmet-anc/firmware-manifest@1"
-
-
-@dataclass(frozen=True)
-class Manifest:
-    """The manifest written beside the generated code (``data`` is its JSON content)."""
-
-    outdir: Path
-    data: dict
-
-    @property
-    def name(self) -> str:
-        return self.data["name"]
-
-    @property
-    def files(self) -> list[Path]:
-        return [self.outdir / f for f in self.data["files"]]
-
-    @property
-    def verification(self) -> dict | None:
-        return self.data["verification"]
-
-
-def _complex_list(values) -> list[list[float]]:
-    return [[float(np.real(v)), float(np.imag(v))] for v in values]
-
-
-def _json_ready(value):
-    """Nested data with non-finite floats (e.g. the gain of an unstable model) replaced by None."""
-    if isinstance(value, dict):
-        return {k: _json_ready(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
-
-
-def load_sweeps(sweeps, fs: float | None = None) -> tuple[list[np.ndarray], list[str]]:
-    """Sweep inputs (full-scale float64) and labels from WAV paths, recordings or arrays.
-
-    A path is read with :func:`sysid.io.recordings.load_recording`; of a recording
-    (a path's or a :class:`sysid.io.recordings.Recording` given directly) the input
-    channel ``u`` is what the filter sees on the board. With ``fs`` given, a
-    recording at another sample rate is an error (the filter runs at ``fs``;
-    nothing is resampled).
-    """
-    signals, labels = [], []
-    for index, sweep in enumerate(sweeps or []):
-        if isinstance(sweep, (str, os.PathLike)):
-            from sysid.io.recordings import RecordingWarning, load_recording
-
-            with warnings.catch_warnings():
-                # Quality warnings concern the ear channel, which the filter never sees.
-                warnings.simplefilter("ignore", RecordingWarning)
-                sweep = load_recording(sweep)
-        if hasattr(sweep, "u") and hasattr(sweep, "fs"):
-            label = Path(str(getattr(sweep, "path", f"sweep {index + 1}"))).name
-            if fs is not None and abs(sweep.fs - fs) > 1e-9 * fs:
-                raise CodegenError(f"{label}: recorded at {sweep.fs:g} Hz but the filter runs at {fs:g} Hz")
-            signals.append(np.asarray(sweep.u, float))
-            labels.append(label)
-        else:
-            array = np.asarray(sweep, float).reshape(-1)
-            if array.size == 0 or not np.all(np.isfinite(array)):
-                raise CodegenError(f"sweep {index + 1} must be a non-empty array of finite samples")
-            signals.append(array)
-            labels.append(f"sweep {index + 1}")
-    return signals, labels
-
-
-def _manifest_data(plan: Plan, name: str, variant: str, files: dict[str, str], verification) -> dict:
-    realisation, cascade = plan.realisation, plan.cascade
-    data = {
-        "format": MANIFEST_FORMAT,
-        "generator": f"helmet-anc codegen {__version__}",
-        "name": name,
-        "variant": variant,
-        "target": plan.target,
-        "model": {**plan.provenance, "fs": plan.model.fs, "delay": plan.model.delay,
-                  "stable": plan.model.stable, "spectral_radius": plan.model.spectral_radius,
-                  "input_nonlinearity": plan.model.input_nonlinearity},
-        "board": {"fs": realisation.fs, "delay": realisation.delay, "delay_error_s": realisation.delay_error_s,
-                  "resampled_from": realisation.resampled_from,
-                  "delay_approximation": ("delay rounded to the nearest board sample" if realisation.resampled_from
-                                          else "exact")},
-        "realisation": {"form": "balanced", "hankel_singular_values": realisation.hankel_singular_values.tolist(),
-                        "order": int(realisation.A.shape[0]), "truncated_from": realisation.truncated_from,
-                        "truncation_error_bound": realisation.truncation_bound},
-        "cascade": {"scaling": cascade.scaling, "headroom_db": cascade.headroom_db,
-                    "realisation_error": cascade.realisation_error,
-                    "margins": noise.node_margins(cascade),
-                    "sections": [{"order": s.order, "b": list(s.b), "a": list(s.a), "poles": _complex_list(s.poles),
-                                  "zeros": _complex_list(s.zeros)} for s in cascade.sections]},
-        "formats": {},
-        "predicted": {k: v.as_dict() for k, v in plan.predictions.items()},
-        "min_snr_db": plan.min_snr_db,
-        "verification": verification,
-        "files": {filename: hashlib.sha256(text.encode("utf-8")).hexdigest() for filename, text in files.items()},
-    }
-    data["formats"].update(plan.spec.formats(plan))
-    return data
+__all__ = ["MANIFEST_FORMAT", "Manifest", "format_verification_table", "generate_controller_firmware",
+           "generate_firmware", "load_sweeps"]
 
 
 def generate_firmware(model, outdir, name: str | None = None, variant: str = "both", fs: float | None = None,
@@ -155,10 +51,7 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
         if progress is not None:
             progress(stages.index(label), len(stages), label)
 
-    try:
-        check_output_directory(outdir, "manifest.json", MANIFEST_FORMAT, force=force)
-    except OutputRefused as exc:
-        raise OutputError(str(exc)) from None
+    check_output(outdir, force)
     stage("design")
     model_file = None
     if not isinstance(model, Model):
@@ -177,13 +70,52 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
     if sweeps:
         stage("verify")
         signals, labels = load_sweeps(sweeps, plan.realisation.fs)
-        verification = verify_host(plan, plan.spec.host(name, files, plan), signals, labels)
-    data = _json_ready(_manifest_data(plan, name, variant, files, verification))
-    manifest_text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False, default=float) + "\n"
+        verification = verify_host(plan, host_filter(plan.spec.host, name, files, plan.designs), signals, labels)
+    data = json_ready(manifest_data(name, files, verification, variant=variant, **plan.record()))
     stage("write")
-    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text}, force=force)
+    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text(data)}, force=force)
     if progress is not None:
         progress(len(stages), len(stages), "done")
+    return Manifest(outdir=Path(outdir), data=data)
+
+
+def generate_controller_firmware(controller, outdir, *, variant: str = "both", min_snr: float = 30.0,
+                                 quantiser: str = "efb", force: bool = False, progress=None) -> Manifest:
+    """Generate the control path's filters of ``controller`` (an :class:`anc.controller.Controller`
+    or a path to its JSON) into ``outdir`` (:func:`codegen.controller.plan_controller`); returns the
+    :class:`codegen.manifest.Manifest`. The output-folder rules are those of ``generate_firmware``."""
+    check_output(outdir, force)
+    if progress is not None:
+        progress(0, 3, "design")
+    plan = plan_controller(controller, variant=variant, min_snr=min_snr, quantiser=quantiser)
+    controller_hash = plan.controller_hash()
+    if progress is not None:
+        progress(1, 3, "render")
+    files: dict[str, str] = {}
+    filters = {}
+    for part, sub in plan.plans.items():
+        name = FILTER_NAMES[part]
+        context = build_context(name=name, provenance=plan.provenance(part, controller_hash), fs=sub.realisation.fs,
+                                cascade=sub.cascade, variants=tuple(sub.predictions), fixed=sub.fixed,
+                                floating=sub.floating)
+        rendered = render_files(context)
+        files.update(rendered)
+        filters[name] = manifest_data(name, rendered, None, variant=variant, **sub.record())
+    files["controller_config.h"] = render_template("controller_config.h.j2",
+                                                   controller_config_context(plan, controller_hash))
+    data = manifest_data("controller", files, None, kind="controller",
+                         controller={"file": plan.controller_file, "sha256": controller_hash, "fs": plan.controller.fs,
+                                     "latency_samples": plan.latency_samples,
+                                     # The control path's processing latency is 2 x ANC_CONTROL_BLOCK
+                                     # (firmware/anc_control.h).
+                                     "largest_control_block": min(CONTROL_BLOCK_MAX, plan.latency_samples // 2)},
+                         filters=filters, headroom=plan.headroom)
+    data = json_ready(data)
+    if progress is not None:
+        progress(2, 3, "write")
+    outdir = write_directory(outdir, {**files, "manifest.json": manifest_text(data)}, force=force)
+    if progress is not None:
+        progress(3, 3, "done")
     return Manifest(outdir=Path(outdir), data=data)
 
 

@@ -1,4 +1,10 @@
-"""Host build of generated C through cffi (API mode), cached by source hash.
+"""Running generated code on the host: cffi builds cached by source hash, and the CMSIS-DSP filter.
+
+Fourth step of firmware generation (plan -> context -> render -> build -> verify ->
+manifest), and a leaf of it: it takes rendered text (or a cmsis target's tables) and
+imports no other step; from the design modules only the cmsis kernel's output
+conversion (:func:`codegen.cmsis.q31_to_q15`). :func:`host_filter` runs a target's
+code the way its description names (``codegen.targets.Target.host``).
 
 Each distinct (header, source, flags) triple is compiled once into
 ``<cache>/<hash>/`` and re-imported afterwards; the cache folder is
@@ -22,9 +28,10 @@ import numpy as np
 
 from sysid.core.files import staged_directory
 
-from .errors import BuildError
+from .cmsis import q31_to_q15
+from .errors import BuildError, VerificationError
 
-__all__ = ["HOST_CFLAGS", "HostFilter", "build_host", "cache_dir"]
+__all__ = ["HOST_CFLAGS", "HOST_RUNNERS", "CmsisPackageFilter", "HostFilter", "build_host", "cache_dir", "host_filter"]
 
 # The generated code's promise: clean C99 under these warnings. Contraction of
 # a*b+c into fused multiply-adds is off so the float code matches its reference.
@@ -138,3 +145,76 @@ def build_host(name: str, header: str, source: str) -> HostFilter:
     spec.loader.exec_module(module)
     sys.modules[module_name] = module
     return HostFilter(module, name)
+
+
+class CmsisPackageFilter:
+    """The ``cmsisdsp`` package's kernels run on the cmsis target's tables, as the C would on the board.
+
+    Used to verify ``--target cmsis``, whose C needs CMSIS-DSP headers that the host
+    build does not have; the delay and Q15 conversions are applied as in the template.
+    """
+
+    def __init__(self, tables):
+        try:
+            import cmsisdsp
+        except ImportError:
+            raise VerificationError("--verify with --target cmsis needs the cmsisdsp package (pip install cmsisdsp)") from None
+        self._dsp, self._tables = cmsisdsp, tables
+        self.reset("q15")
+        self.reset("f32")
+
+    def reset(self, kind: str) -> None:
+        dsp, tables, stages = self._dsp, self._tables, len(self._tables.q31_coefficients)
+        if kind == "q15":
+            q31_rows = np.array(tables.q31_coefficients, np.int32).ravel()
+            if tables.kernel == "q15":
+                self._fixed = dsp.arm_biquad_casd_df1_inst_q15()
+                rows = np.array([(r[0], 0, *r[1:]) for r in tables.q15_coefficients], np.int16).ravel()
+                dsp.arm_biquad_cascade_df1_init_q15(self._fixed, stages, rows, np.zeros(4 * stages, np.int16),
+                                                    tables.q15_post_shift)
+            elif tables.kernel == "q31":
+                self._fixed = dsp.arm_biquad_casd_df1_inst_q31()
+                dsp.arm_biquad_cascade_df1_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int32),
+                                                    tables.post_shift)
+            else:
+                self._fixed = dsp.arm_biquad_cas_df1_32x64_ins_q31()
+                dsp.arm_biquad_cas_df1_32x64_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int64),
+                                                      tables.post_shift)
+            self._line_q15 = np.zeros(tables.delay, np.int16)
+        else:
+            self._f32 = dsp.arm_biquad_cascade_df2T_instance_f32()
+            dsp.arm_biquad_cascade_df2T_init_f32(self._f32, stages, np.array(tables.f32_coefficients, np.float32).ravel(),
+                                                 np.zeros(2 * stages, np.float32))
+            self._line_f32 = np.zeros(tables.delay, np.float32)
+
+    @staticmethod
+    def _delay(line: np.ndarray, x: np.ndarray):
+        joined = np.concatenate((line, x))
+        return joined[: x.size], joined[x.size:]
+
+    def process_q15(self, x: np.ndarray) -> np.ndarray:
+        u, self._line_q15 = self._delay(self._line_q15, np.asarray(x, np.int16))
+        if self._tables.kernel == "q15":
+            return np.asarray(self._dsp.arm_biquad_cascade_df1_q15(self._fixed, u), np.int16)
+        run = (self._dsp.arm_biquad_cascade_df1_q31 if self._tables.kernel == "q31"
+               else self._dsp.arm_biquad_cas_df1_32x64_q31)
+        return q31_to_q15(run(self._fixed, u.astype(np.int32) * 65536), self._tables.output_shift)
+
+    def process_f32(self, x: np.ndarray) -> np.ndarray:
+        u, self._line_f32 = self._delay(self._line_f32, np.asarray(x, np.float32))
+        return np.asarray(self._dsp.arm_biquad_cascade_df2T_f32(self._f32, u), np.float32)
+
+
+# How a target's code can be run on the host (``codegen.targets.Target.host``).
+HOST_RUNNERS = ("cffi", "cmsisdsp")
+
+
+def host_filter(runner: str, name: str, files: dict[str, str], designs: dict):
+    """The generated filter ``name`` running on the host, for verification: with ``runner``
+    'cffi' its rendered ``files`` compiled (:func:`build_host`), with 'cmsisdsp' the cmsisdsp
+    package's kernels on the tables in ``designs["cmsis"]`` (:class:`CmsisPackageFilter`)."""
+    if runner == "cffi":
+        return build_host(name, files[f"{name}_filter.h"], files[f"{name}_filter.c"])
+    if runner == "cmsisdsp":
+        return CmsisPackageFilter(designs["cmsis"])
+    raise BuildError(f"host runner must be one of {', '.join(HOST_RUNNERS)}; found {runner!r}")

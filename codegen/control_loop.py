@@ -8,6 +8,9 @@ generated code; the float32 one performs the operations of
 :func:`board_loop` is the twin of ``firmware/closed_loop.c`` running
 ``firmware/anc_control.c``: the quantised controller against a simulated true plant, in
 the codec's frame order, with the same limiter; its Q15 run equals the C bit for bit.
+
+Beside the steps of firmware generation: it imports the designs and the references, and
+takes a controller's plan (:class:`codegen.controller.ControllerPlan`) as an argument.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
 All subclass :class:`sysid.core.errors.HelmetAncError` (a ``ValueError``), so the
 command-line front ends turn them into a one-line message and exit status 2.
+The lowest floor of ``codegen``: every other module may import it, it imports none.
 """
 
 from sysid.core.errors import HelmetAncError

@@ -25,6 +25,9 @@ and the feedback coefficients keep 29-31 fractional bits (d = 0). When the numer
 pushes g beyond 3 (a section with a big gain, e.g. a zero near z = 1 against a pole
 near z = 1), the feedback gets its own d extra fractional bits and its product sum is
 shifted down by d (one 64-bit shift) instead of losing them.
+
+Below the steps of firmware generation: a design module (it imports the sections and
+the errors) that the generic target's Q15 variant (:mod:`codegen.targets`) runs.
 """
 
 from __future__ import annotations

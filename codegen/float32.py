@@ -10,6 +10,9 @@ exactly zero are left out of both),
 a1 ~ -2 keeps float32's relative precision on the small distance of the poles from
 z = 1; the design reference measured 45-59 dB for plain float32 DF2T on these poles,
 all of it from coefficient rounding.
+
+Below the steps of firmware generation: a design module (it imports the sections and
+:mod:`codegen.fixedpoint`'s delta coefficients) that the generic target's float variant runs.
 """
 
 from __future__ import annotations

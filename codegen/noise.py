@@ -17,6 +17,9 @@ variant adds below full scale:
 The predicted SNR combines both, 1/snr = 1/snr_c + 1/snr_r (linear ratios).
 Overflow margins are given per node as 20 log10(1 / peak gain) for a full-scale
 sine (L-infinity) and for the worst-case input (L1 norm of the impulse response).
+
+Below the steps of firmware generation: the targets' variants predict with it and the
+plan records its margins; it imports only the sections.
 """
 
 from __future__ import annotations

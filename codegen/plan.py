@@ -1,9 +1,12 @@
 """The complete firmware design of one model: every number the generated code needs.
 
-:func:`plan_firmware` runs realisation -> sections -> the designs of the requested
-variants of the target (:mod:`codegen.targets`) -> noise predictions, and applies the
-refusals of the design reference: an unstable model (unless allowed) and any variant
-whose predicted SNR misses the requested one.
+First step of firmware generation (plan -> context -> render -> build -> verify ->
+manifest). :func:`plan_firmware` runs realisation -> sections -> the designs of the
+requested variants of the target (:mod:`codegen.targets`) -> noise predictions, and
+applies the refusals of the design reference: an unstable model (unless allowed) and
+any variant whose predicted SNR misses the requested one. :meth:`Plan.record` is what
+the manifest says of the plan. It imports the design modules and the target
+descriptions, nothing of the steps after it.
 """
 
 from __future__ import annotations
@@ -11,8 +14,11 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from sysid.core.model import Model
 
+from . import noise
 from .cmsis import CmsisTables
 from .errors import CodegenError, PrecisionError
 from .fixedpoint import QUANTISERS, FixedDesign
@@ -81,6 +87,36 @@ class Plan:
         ident = self.model.identification or {}
         return {"path": self.model.path, "file": self.model_file, "hash": model_hash(self.model),
                 "gamma": ident.get("gamma"), "order": self.model.order}
+
+    def record(self) -> dict:
+        """What the manifest says of the plan: the target, the model, the board's rate and delay, the
+        realisation, the scaled cascade, the variants' number formats and predicted figures."""
+        realisation, cascade = self.realisation, self.cascade
+        return {
+            "target": self.target,
+            "model": {**self.provenance, "fs": self.model.fs, "delay": self.model.delay,
+                      "stable": self.model.stable, "spectral_radius": self.model.spectral_radius,
+                      "input_nonlinearity": self.model.input_nonlinearity},
+            "board": {"fs": realisation.fs, "delay": realisation.delay, "delay_error_s": realisation.delay_error_s,
+                      "resampled_from": realisation.resampled_from,
+                      "delay_approximation": ("delay rounded to the nearest board sample" if realisation.resampled_from
+                                              else "exact")},
+            "realisation": {"form": "balanced", "hankel_singular_values": realisation.hankel_singular_values.tolist(),
+                            "order": int(realisation.A.shape[0]), "truncated_from": realisation.truncated_from,
+                            "truncation_error_bound": realisation.truncation_bound},
+            "cascade": {"scaling": cascade.scaling, "headroom_db": cascade.headroom_db,
+                        "realisation_error": cascade.realisation_error,
+                        "margins": noise.node_margins(cascade),
+                        "sections": [{"order": s.order, "b": list(s.b), "a": list(s.a), "poles": _complex_list(s.poles),
+                                      "zeros": _complex_list(s.zeros)} for s in cascade.sections]},
+            "formats": self.spec.formats(self),
+            "predicted": {k: v.as_dict() for k, v in self.predictions.items()},
+            "min_snr_db": self.min_snr_db,
+        }
+
+
+def _complex_list(values) -> list[list[float]]:
+    return [[float(np.real(v)), float(np.imag(v))] for v in values]
 
 
 def plan_firmware(model: Model, *, variant: str = "both", fs: float | None = None, target: str = "generic",

@@ -18,6 +18,9 @@ counts divided by the difference of the counts).
 QEMU counts instructions, not cycles: a Cortex-M4 takes 1 cycle for most
 data-processing instructions (SMLAL and SMULL included), 2 for a load and 1 + pipeline
 refill (1-3) for a taken branch (ARM DDI 0439B, Cortex-M4 TRM, section 3.3).
+
+Beside the steps of firmware generation: a leaf (it imports only the errors) that the
+tests and benchmarks use on rendered code.
 """
 
 from __future__ import annotations

@@ -1,13 +1,17 @@
 """State-space realisations for code generation: balancing, truncation, re-discretisation.
 
-The balanced realisation (Moore 1981; Laub et al. 1987, "square-root" algorithm)
-has equal, diagonal controllability and observability Gramians whose diagonal are
-the Hankel singular values sigma_1 >= ... >= sigma_n. Truncating to the first r
-states bounds the error by ||G - G_r||_inf <= 2 sum_{i>r} sigma_i (Enns' bound).
+The balanced realisation (Moore 1981; Laub et al. 1987, "square-root" algorithm,
+:func:`sysid.core.lti.minimal_balanced_realisation`) has equal, diagonal
+controllability and observability Gramians whose diagonal are the Hankel singular
+values sigma_1 >= ... >= sigma_n. Truncating to the first r states bounds the error
+by ||G - G_r||_inf <= 2 sum_{i>r} sigma_i (Enns' bound).
 
 Re-discretisation goes through continuous time assuming a zero-order hold:
 [[A, B], [0, 1]] = expm([[Ac, Bc], [0, 0]] T), so (Ac, Bc) come from the matrix
 logarithm and the board-rate model from the matrix exponential at the new period.
+
+Below the steps of firmware generation: the first design module the plan
+(:mod:`codegen.plan`) runs; it imports only ``sysid.core`` and the errors.
 """
 
 from __future__ import annotations
@@ -17,12 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from sysid.core.lti import gramians, hankel_singular_values
+from sysid.core.lti import minimal_balanced_realisation
 from sysid.core.model import Model
 
 from .errors import CodegenError, UnstableModelError
 
-__all__ = ["Realisation", "balanced_realisation", "hankel_singular_values", "realise", "rediscretise"]
+__all__ = ["Realisation", "realise", "rediscretise"]
 
 
 @dataclass(frozen=True)
@@ -44,40 +48,6 @@ class Realisation:
     truncation_bound: float
     delay_error_s: float
     resampled_from: float | None
-
-
-def _psd_factor(W: np.ndarray) -> np.ndarray:
-    """Upper factor R with W = R' R, robust to a Gramian that is only semi-definite."""
-    try:
-        return scipy.linalg.cholesky(W, lower=False)
-    except np.linalg.LinAlgError:
-        values, vectors = np.linalg.eigh(W)
-        values = np.clip(values, 0.0, None)
-        return (vectors * np.sqrt(values)).T
-
-
-def balanced_realisation(A, B, C, D, order: int | None = None):
-    """Square-root balanced realisation, optionally truncated to ``order`` states.
-
-    Returns (Ab, Bb, Cb, D, hsv). With Wc = Lc Lc', Wo = Lo Lo' and the SVD
-    Lo' Lc = U S V', the balancing transformation is T = Lc V S^-1/2 with inverse
-    S^-1/2 U' Lo' (Laub, Heath, Paige & Ward 1987). States with a Hankel singular
-    value below 1e-14 sigma_1 are uncontrollable or unobservable and always dropped.
-    """
-    A = np.asarray(A, float)
-    B = np.asarray(B, float).reshape(-1, 1)
-    C = np.asarray(C, float).reshape(1, -1)
-    wc, wo = gramians(A, B, C)
-    lc = _psd_factor(wc).T
-    lo = _psd_factor(wo).T
-    U, s, Vt = np.linalg.svd(lo.T @ lc)
-    keep = int(np.sum(s > 1e-14 * s[0])) if s.size and s[0] > 0 else 0
-    if order is not None:
-        keep = min(keep, int(order))
-    s_half = np.sqrt(s[:keep])
-    T = lc @ Vt[:keep].T / s_half
-    T_inv = (U[:, :keep] / s_half).T @ lo.T
-    return T_inv @ A @ T, T_inv @ B, C @ T, float(np.asarray(D).reshape(-1)[0]), s
 
 
 def rediscretise(A, B, fs_from: float, fs_to: float):
@@ -134,7 +104,8 @@ def realise(model: Model, fs: float | None = None, order: int | None = None, all
         raise CodegenError(f"order must be at least 1; found {order}")
     A, B, C, D = model.A, model.B, model.C, float(model.D[0, 0])
     if model.stable and model.order:
-        A, B, C, D, hsv = balanced_realisation(A, B, C, D, order)
+        balanced = minimal_balanced_realisation(A, B, C, D, order)
+        A, B, C, D, hsv = balanced.A, balanced.B, balanced.C, balanced.D, balanced.hankel_singular_values
         truncated = model.order if A.shape[0] < model.order else None
         bound = float(2 * np.sum(hsv[A.shape[0]:]))
     else:

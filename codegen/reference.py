@@ -11,6 +11,9 @@ The cascade is processed section after section over the whole signal: each
 section's output depends only on its input sequence, so this equals the C code's
 order (the Q15 code runs section after section over blocks of up to
 ``NAME_Q15_CHUNK`` samples, the float code sample after sample).
+
+Below the steps of firmware generation: the targets' variants name these references and
+verification runs them; it imports the designs and the realisation.
 """
 
 from __future__ import annotations

@@ -4,6 +4,8 @@ The sections themselves (pairing, ordering, relative degree) come from
 ``sysid.core.sections``. Scaling makes the peak gain from the cascade input to the output
 of each section but the last equal to the headroom (L-infinity norm by default, or
 the L1 norm of the impulse response, which rules out overflow for any input).
+Below the steps of firmware generation: a design module the plan runs after
+:mod:`codegen.realise`, the only module of ``codegen`` it imports besides the errors.
 """
 
 from __future__ import annotations

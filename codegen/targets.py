@@ -11,12 +11,17 @@ functions of the generated C carry its cost per section (for the emulated
 Cortex-M4 count of :mod:`codegen.qemu_cost`).
 
 Adding a kind of generated code means adding one Target (or Variant) here; the
-plan, rendering, verification and manifest code only ask the registry
-(:func:`get_target`). The controller filters (:mod:`codegen.controller`) are the
-generic target's variants under fixed names; filters that need templates or
-numbers of their own become a Target whose ``variants`` reuse ``FIXED_Q15`` and
-``FLOAT32`` (or new Variants) with its own ``templates``, ``context`` and ``formats``.
-Registered:
+plan, context, rendering, verification and manifest code only ask the registry
+(:func:`get_target`). This module describes; the steps of firmware generation
+(plan -> context -> render -> build -> verify -> manifest) use the descriptions,
+and it imports none of them: the design modules, the Python references and
+:mod:`codegen.c_syntax` only. How a target's code is run on the host is named
+here (``Target.host``) and done by :mod:`codegen.build`.
+
+The controller filters (:mod:`codegen.controller`) are the generic target's
+variants under fixed names; filters that need templates or numbers of their own
+become a Target whose ``variants`` reuse ``FIXED_Q15`` and ``FLOAT32`` (or new
+Variants) with its own ``templates``, ``context`` and ``formats``. Registered:
 
 ``generic``  plain C99: Q15 direct-form-I sections with error feedback
              (:mod:`codegen.fixedpoint`) and float32 delta-form sections
@@ -34,6 +39,7 @@ from typing import Callable
 import numpy as np
 
 from . import noise
+from .c_syntax import float_literal
 from .cmsis import KERNEL_FUNCTIONS, KERNELS, cmsis_q15_reference, design_cmsis, df2t_f32_reference
 from .errors import CodegenError, PrecisionError
 from .fixedpoint import design_fixed
@@ -114,8 +120,9 @@ class Target:
     ``scaling``     the section scaling norm it requires (None: the user's choice);
     ``context``     designs by plan field -> the template fields only this target uses;
     ``formats``     plan -> the manifest's "formats" entries of this target;
-    ``host``        (name, files, plan) -> an object with reset(kind), process_q15,
-                    process_f32 that runs the generated code (or its library) on the host.
+    ``host``        how the generated code is run on the host for verification, a runner of
+                    :func:`codegen.build.host_filter`: 'cffi' (the C compiled for the host) or
+                    'cmsisdsp' (the ``cmsisdsp`` package's kernels on the target's tables).
     """
 
     name: str
@@ -125,7 +132,7 @@ class Target:
     scaling: str | None
     context: Callable[[dict], dict]
     formats: Callable[[object], dict]
-    host: Callable[[str, dict, object], object]
+    host: str
 
     def selected(self, variant: str) -> list[Variant]:
         """The variants --variant asks for ('both': all of this target's)."""
@@ -197,15 +204,9 @@ def _generic_formats(plan) -> dict:
     return formats
 
 
-def _generic_host(name: str, files: dict, plan):
-    from .build import build_host
-
-    return build_host(name, files[f"{name}_filter.h"], files[f"{name}_filter.c"])
-
-
 GENERIC = Target(name="generic", description="generic C99 (Q15 and float32)", templates=("filter.h.j2", "filter.c.j2"),
                  variants={"q15": FIXED_Q15, "float": FLOAT32}, scaling=None, context=lambda designs: {},
-                 formats=_generic_formats, host=_generic_host)
+                 formats=_generic_formats, host="cffi")
 
 
 # --- cmsis: tables for CMSIS-DSP's kernels ------------------------------------------------------
@@ -236,8 +237,6 @@ CMSIS_F32 = Variant(key="float", kind="f32", plan_field="cmsis", design=_design_
 
 
 def _cmsis_context(designs: dict) -> dict:
-    from .render import float_literal
-
     cmsis = designs["cmsis"]
     return {
         "kernel": cmsis.kernel,
@@ -270,18 +269,12 @@ def _cmsis_formats(plan) -> dict:
         "f32_coefficients": [list(r) for r in cmsis.f32_coefficients]}}
 
 
-def _cmsis_host(name: str, files: dict, plan):
-    # The C needs CMSIS-DSP's headers and library, which the host build does not have: the cmsisdsp
-    # package runs the same kernels on the same tables.
-    from .verify import CmsisPackageFilter
-
-    return CmsisPackageFilter(plan.cmsis)
-
-
 CMSIS = Target(name="cmsis", description="coefficient tables for CMSIS-DSP's biquad functions",
                templates=("cmsis_filter.h.j2", "cmsis_filter.c.j2"), variants={"q15": CMSIS_Q15, "float": CMSIS_F32},
                # CMSIS-DSP's Q31 kernels wrap on overflow: only worst-case (l1) scaling makes that impossible.
-               scaling="l1", context=_cmsis_context, formats=_cmsis_formats, host=_cmsis_host)
+               # Its C needs CMSIS-DSP's headers and library, which the host build does not have: the
+               # cmsisdsp package runs the same kernels on the same tables.
+               scaling="l1", context=_cmsis_context, formats=_cmsis_formats, host="cmsisdsp")
 
 
 TARGETS = {target.name: target for target in (GENERIC, CMSIS)}

@@ -1,5 +1,10 @@
 """Verification of a host build against the Python references, sample by sample.
 
+Fifth step of firmware generation (plan -> context -> render -> build -> verify ->
+manifest): it takes the plan, a filter running on the host (:mod:`codegen.build`) and
+the sweeps (:func:`load_sweeps`, the one place firmware generation reads recordings),
+and returns the figures the manifest records.
+
 For every sweep: the Q15 C output must equal :func:`codegen.reference.fixed_reference`
 to 0 LSB; the float C output must equal :func:`codegen.reference.float32_reference`
 within ``FLOAT_TOLERANCE`` (it is bit-exact when the compiler keeps the operation
@@ -10,17 +15,52 @@ carried over between calls as on the board.
 
 from __future__ import annotations
 
+import os
+import warnings
+from pathlib import Path
+
 import numpy as np
 
+from sysid.io.recordings import RecordingWarning, load_recording
+
 from .build import HostFilter
-from .cmsis import q31_to_q15
-from .errors import VerificationError
+from .errors import CodegenError, VerificationError
 from .plan import Plan
 from .reference import float64_reference
 from .targets import CMSIS_FLOAT_TOLERANCE, FLOAT_TOLERANCE
 
-__all__ = ["CMSIS_FLOAT_TOLERANCE", "FLOAT_TOLERANCE", "CmsisPackageFilter", "reference_outputs", "snr_db", "verify_host"]
+__all__ = ["CMSIS_FLOAT_TOLERANCE", "FLOAT_TOLERANCE", "load_sweeps", "reference_outputs", "snr_db", "verify_host"]
 
+
+def load_sweeps(sweeps, fs: float | None = None) -> tuple[list[np.ndarray], list[str]]:
+    """Sweep inputs (full-scale float64) and labels from WAV paths, recordings or arrays.
+
+    A path is read with :func:`sysid.io.recordings.load_recording`; of a recording
+    (a path's or a :class:`sysid.io.recordings.Recording` given directly) the input
+    channel ``u`` is what the filter sees on the board. With ``fs`` given, a
+    recording at another sample rate is an error (the filter runs at ``fs``;
+    nothing is resampled).
+    """
+    signals, labels = [], []
+    for index, sweep in enumerate(sweeps or []):
+        if isinstance(sweep, (str, os.PathLike)):
+            with warnings.catch_warnings():
+                # Quality warnings concern the ear channel, which the filter never sees.
+                warnings.simplefilter("ignore", RecordingWarning)
+                sweep = load_recording(sweep)
+        if hasattr(sweep, "u") and hasattr(sweep, "fs"):
+            label = Path(str(getattr(sweep, "path", f"sweep {index + 1}"))).name
+            if fs is not None and abs(sweep.fs - fs) > 1e-9 * fs:
+                raise CodegenError(f"{label}: recorded at {sweep.fs:g} Hz but the filter runs at {fs:g} Hz")
+            signals.append(np.asarray(sweep.u, float))
+            labels.append(label)
+        else:
+            array = np.asarray(sweep, float).reshape(-1)
+            if array.size == 0 or not np.all(np.isfinite(array)):
+                raise CodegenError(f"sweep {index + 1} must be a non-empty array of finite samples")
+            signals.append(array)
+            labels.append(f"sweep {index + 1}")
+    return signals, labels
 
 
 def snr_db(reference: np.ndarray, test: np.ndarray) -> float:
@@ -88,61 +128,3 @@ def verify_host(plan: Plan, host: HostFilter, sweeps: list[np.ndarray], names: l
             row[variant.key] = _compare(variant, label, c_out, refs[variant.key], refs[f"float64_{variant.key}"])
         rows.append(row)
     return {"sweeps": rows, "passed": True}
-
-
-class CmsisPackageFilter:
-    """The ``cmsisdsp`` package's kernels run on the cmsis target's tables, as the C would on the board.
-
-    Used to verify ``--target cmsis``, whose C needs CMSIS-DSP headers that the host
-    build does not have; the delay and Q15 conversions are applied as in the template.
-    """
-
-    def __init__(self, tables):
-        try:
-            import cmsisdsp
-        except ImportError:
-            raise VerificationError("--verify with --target cmsis needs the cmsisdsp package (pip install cmsisdsp)") from None
-        self._dsp, self._tables = cmsisdsp, tables
-        self.reset("q15")
-        self.reset("f32")
-
-    def reset(self, kind: str) -> None:
-        dsp, tables, stages = self._dsp, self._tables, len(self._tables.q31_coefficients)
-        if kind == "q15":
-            q31_rows = np.array(tables.q31_coefficients, np.int32).ravel()
-            if tables.kernel == "q15":
-                self._fixed = dsp.arm_biquad_casd_df1_inst_q15()
-                rows = np.array([(r[0], 0, *r[1:]) for r in tables.q15_coefficients], np.int16).ravel()
-                dsp.arm_biquad_cascade_df1_init_q15(self._fixed, stages, rows, np.zeros(4 * stages, np.int16),
-                                                    tables.q15_post_shift)
-            elif tables.kernel == "q31":
-                self._fixed = dsp.arm_biquad_casd_df1_inst_q31()
-                dsp.arm_biquad_cascade_df1_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int32),
-                                                    tables.post_shift)
-            else:
-                self._fixed = dsp.arm_biquad_cas_df1_32x64_ins_q31()
-                dsp.arm_biquad_cas_df1_32x64_init_q31(self._fixed, stages, q31_rows, np.zeros(4 * stages, np.int64),
-                                                      tables.post_shift)
-            self._line_q15 = np.zeros(tables.delay, np.int16)
-        else:
-            self._f32 = dsp.arm_biquad_cascade_df2T_instance_f32()
-            dsp.arm_biquad_cascade_df2T_init_f32(self._f32, stages, np.array(tables.f32_coefficients, np.float32).ravel(),
-                                                 np.zeros(2 * stages, np.float32))
-            self._line_f32 = np.zeros(tables.delay, np.float32)
-
-    @staticmethod
-    def _delay(line: np.ndarray, x: np.ndarray):
-        joined = np.concatenate((line, x))
-        return joined[: x.size], joined[x.size:]
-
-    def process_q15(self, x: np.ndarray) -> np.ndarray:
-        u, self._line_q15 = self._delay(self._line_q15, np.asarray(x, np.int16))
-        if self._tables.kernel == "q15":
-            return np.asarray(self._dsp.arm_biquad_cascade_df1_q15(self._fixed, u), np.int16)
-        run = (self._dsp.arm_biquad_cascade_df1_q31 if self._tables.kernel == "q31"
-               else self._dsp.arm_biquad_cas_df1_32x64_q31)
-        return q31_to_q15(run(self._fixed, u.astype(np.int32) * 65536), self._tables.output_shift)
-
-    def process_f32(self, x: np.ndarray) -> np.ndarray:
-        u, self._line_f32 = self._delay(self._line_f32, np.asarray(x, np.float32))
-        return np.asarray(self._dsp.arm_biquad_cascade_df2T_f32(self._f32, u), np.float32)

@@ -113,7 +113,8 @@ def _generate(parser, run):
 
 def _controller(parser, args, argv) -> int:
     """``--controller``: the control path's filters and their worst-case headroom table."""
-    from codegen.controller import format_headroom_table, generate_controller_firmware
+    from codegen.api import generate_controller_firmware
+    from codegen.controller import format_headroom_table
 
     # --min-snr given on the command line applies; its model default (80) does not.
     given = argparse.ArgumentParser(add_help=False)

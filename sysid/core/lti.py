@@ -1,12 +1,13 @@
-"""Numerics of single-input single-output discrete-time state-space systems.
+"""Realisations of single-input single-output discrete-time state-space systems, and all balancing.
 
 The state-space convention is x(t+1) = A x(t) + B u(t), y(t) = C x(t) + D u(t)
-(seed appendix A). Frequency responses and simulations go through the modal
-(eigenvector) form, which turns an order-n system into n independent first-order
-recursions; that is exact, vectorises over frequencies and time, and avoids the
-high-order polynomials that the seed's appendix shows to be numerically unsafe.
-When A is close to defective (ill-conditioned eigenvectors) the slower but always
-well-posed direct forms are used instead.
+(seed appendix A). Here: stability (``spectral_radius``), real block-diagonal and
+chained realisations, Gramians and Hankel singular values, and every balanced
+realisation of the project: identification's (``balanced_realisation``,
+``balanced_truncation``) and the minimal one of code generation and controller
+design (``minimal_balanced_realisation``). Frequency responses, simulation and
+zeros live in :mod:`sysid.core.response`; their names are offered here too, where
+the rest of the package has always imported them from.
 """
 
 from __future__ import annotations
@@ -15,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
+
+from .response import (MAX_MODAL_CONDITION, ModalForm, as_siso, frequency_response, invariant_zeros, modal_form,
+                       modal_inverse, pole_residue_response, simulate)
 
 __all__ = [
     "ModalForm",
@@ -35,208 +38,13 @@ __all__ = [
     "balanced_truncation",
     "chained_realisation",
     "equalise_states",
+    "MinimalBalanced",
+    "minimal_balanced_realisation",
 ]
 
-# Above this eigenvector condition number the modal form loses more than about
-# half of double precision; the direct forms are used instead.
-MAX_MODAL_CONDITION = 1e8
-# Points per block of ``pole_residue_response`` (its reciprocals, up to 30 poles, within 1 MB).
-_RESPONSE_CHUNK = 2048
 # Real poles closer than this fraction of their distance 1 - |p| from the unit circle are chained
 # (``chained_realisation``).
 _CLUSTER_GAP = 0.1
-
-
-@dataclass(frozen=True)
-class ModalForm:
-    """G(z) = D + sum_i residues[i] / (z - poles[i]) with residues = (C V)_i (V^-1 B)_i."""
-
-    poles: np.ndarray
-    residues: np.ndarray
-    d: float
-    condition: float
-
-    @property
-    def reliable(self) -> bool:
-        return bool(np.isfinite(self.condition) and self.condition < MAX_MODAL_CONDITION)
-
-
-def _as_siso(A, B, C, D):
-    A = np.atleast_2d(np.asarray(A, dtype=float))
-    n = A.shape[0]
-    B = np.asarray(B, dtype=float).reshape(n, 1) if n else np.zeros((0, 1))
-    C = np.asarray(C, dtype=float).reshape(1, n) if n else np.zeros((1, 0))
-    D = float(np.asarray(D, dtype=float).reshape(-1)[0])
-    return A, B, C, D
-
-
-def modal_inverse(V: np.ndarray) -> tuple[np.ndarray | None, float]:
-    """V^-1 and the 1-norm condition number of V; None instead of V^-1 when the
-    condition exceeds the modal form's limit (then the direct forms are used)."""
-    try:
-        V_inv = np.linalg.inv(V)
-    except np.linalg.LinAlgError:
-        return None, np.inf
-    condition = float(np.linalg.norm(V, 1) * np.linalg.norm(V_inv, 1))
-    if not (np.isfinite(condition) and condition < MAX_MODAL_CONDITION):
-        return None, condition
-    return V_inv, condition
-
-
-def modal_form(A, B, C, D) -> ModalForm:
-    """Partial-fraction (modal) form of a SISO state-space system (NaN residues if unreliable)."""
-    A, B, C, D = _as_siso(A, B, C, D)
-    if A.shape[0] == 0:
-        return ModalForm(np.zeros(0, complex), np.zeros(0, complex), D, 1.0)
-    poles, V = np.linalg.eig(A)
-    V_inv, condition = modal_inverse(V)
-    if V_inv is None:
-        return ModalForm(poles, np.full_like(poles, np.nan), D, condition)
-    return ModalForm(poles, (C[0] @ V) * (V_inv @ B[:, 0]), D, condition)
-
-
-def pole_residue_response(poles: np.ndarray, residues: np.ndarray, d, z: np.ndarray) -> np.ndarray:
-    """G(z_k) = d + sum_i residues[i] / (z_k - poles[i]) for 1-D z; poles and residues (..., n) and d (...)
-    may hold several models along their leading axes (the result is then (..., z.size)).
-
-    The sum over the poles is a product of the reciprocals 1 / (z_k - p_i) with the residues,
-    one model and ``_RESPONSE_CHUNK`` points at a time so that the reciprocals stay in cache: a
-    fifth of the time of dividing each residue over all models and points at once.
-    """
-    poles = np.asarray(poles, dtype=complex)
-    residues = np.asarray(residues, dtype=complex)
-    z = np.asarray(z, dtype=complex).reshape(-1)
-    lead = poles.shape[:-1]
-    n = poles.shape[-1]
-    # The models' count from the leading axes (reshape(-1, 0) cannot infer it for a static gain, n = 0).
-    models = int(np.prod(lead, dtype=int))
-    poles, residues = poles.reshape(models, n), residues.reshape(models, n)
-    out = np.empty((poles.shape[0], z.size), dtype=complex)
-    for k in range(poles.shape[0]):
-        for start in range(0, z.size, _RESPONSE_CHUNK):
-            reciprocal = z[start:start + _RESPONSE_CHUNK, None] - poles[k]
-            np.reciprocal(reciprocal, out=reciprocal)
-            out[k, start:start + _RESPONSE_CHUNK] = reciprocal @ residues[k]
-    out += np.broadcast_to(np.asarray(d), lead).reshape(-1, 1)
-    return out.reshape(*lead, z.size)
-
-
-def frequency_response(A, B, C, D, z: np.ndarray) -> np.ndarray:
-    """G(z) = C (zI - A)^-1 B + D at the complex points z (usually e^{j omega})."""
-    A, B, C, D = _as_siso(A, B, C, D)
-    z = np.asarray(z, dtype=complex)
-    modal = modal_form(A, B, C, D)
-    if modal.reliable:
-        return pole_residue_response(modal.poles, modal.residues, D, z.reshape(-1)).reshape(z.shape)
-    # Hessenberg reduction keeps the per-frequency solve well conditioned.
-    H, Q = scipy.linalg.hessenberg(A, calc_q=True)
-    b = Q.T @ B[:, 0]
-    c = C[0] @ Q
-    n = A.shape[0]
-    flat = z.reshape(-1)
-    out = np.empty(flat.size, dtype=complex)
-    # Batched solves (one LAPACK call per chunk of frequencies, bounded memory).
-    for start in range(0, flat.size, 2048):
-        zk = flat[start:start + 2048]
-        pencil = zk[:, None, None] * np.eye(n) - H
-        out[start:start + zk.size] = np.linalg.solve(pencil, np.broadcast_to(b, (zk.size, n))[..., None])[..., 0] @ c + D
-    return out.reshape(z.shape)
-
-
-def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
-    """Output y(t) of the system driven by u(t) from state x0 (zero by default)."""
-    A, B, C, D = _as_siso(A, B, C, D)
-    u = np.asarray(u, dtype=float)
-    n = A.shape[0]
-    if n == 0:
-        return D * u
-    x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).reshape(n)
-    poles, V = np.linalg.eig(A)
-    V_inv, _ = modal_inverse(V)
-    if V_inv is not None:
-        b_modal = V_inv @ B[:, 0]
-        x0_modal = V_inv @ x0
-        c_modal = C[0] @ V
-        t = np.arange(u.size)
-        y = np.zeros(u.size)
-        for p, b, c, x0_i in zip(poles, b_modal, c_modal, x0_modal):
-            # Mode i: x_i(t+1) = p x_i(t) + b_i u(t), a first-order IIR. A real A gives
-            # conjugate modes conjugate contributions (LAPACK returns conjugate
-            # eigenvectors), so each pair is one filter counted twice in the real part.
-            if p.imag < 0:
-                continue
-            # As a one-section sosfilt (a quarter less time than lfilter's general loop).
-            if p.imag == 0:
-                mode = scipy.signal.sosfilt([[0.0, b.real, 0.0, 1.0, -p.real, 0.0]], u)
-                y += (c * mode).real if x0_i == 0 else (c * (mode + x0_i * p ** t)).real
-            elif x0_i == 0:
-                # The pair's real part from rest is one real second-order section, 2 Re(c b / (z - p)) =
-                # (2 Re(g) z^-1 - 2 Re(g conj p) z^-2) / (1 - 2 Re(p) z^-1 + |p|^2 z^-2) with g = c b: half
-                # the time of the complex first-order filter (random helmet 10, order 18, two 10 s sweeps:
-                # 0.12 -> 0.06 s), the samples within 1e-13 of its largest.
-                g = c * b
-                y += scipy.signal.sosfilt([[0.0, 2 * g.real, -2 * (g * np.conj(p)).real, 1.0, -2 * p.real,
-                                            abs(p) ** 2]], u)
-            else:
-                mode = scipy.signal.sosfilt([[0.0, b, 0.0, 1.0, -p, 0.0]], u.astype(complex))
-                y += 2.0 * (c * (mode + x0_i * p ** t)).real
-        return D * u + y
-    if np.any(x0):
-        _, y, _ = scipy.signal.dlsim((A, B, C, np.array([[D]]), 1.0), u, x0=x0)
-        return y[:, 0]
-    return D * u + _schur_response(A, B[:, 0], C[0], u)
-
-
-def _schur_response(A: np.ndarray, b: np.ndarray, c: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """c x(t) of x(t+1) = A x(t) + b u(t) from rest, through the real Schur form A = Z T Z^T.
-
-    For an A whose eigenvectors are too ill-conditioned for the modal form (coinciding poles):
-    T is quasi-upper-triangular, so its diagonal blocks are filtered from the last one up, each
-    driven by b's share and the already simulated later states (a 1 x 1 block is a first-order
-    filter, a 2 x 2 block (zI - T_kk)^-1 = adj(zI - T_kk) / det(zI - T_kk) two second-order
-    sections per state). Backward stable, and O(n^2) vector operations per sample block where
-    ``scipy.signal.dlsim``'s loop over samples took 5 s per 10 s sweep (random helmet 41, order 21).
-    """
-    T, Z = scipy.linalg.schur(A, output="real")
-    n = T.shape[0]
-    drive = Z.T @ b
-    states = np.zeros((n, u.size))
-    k = n
-    while k > 0:
-        size = 2 if k >= 2 and T[k - 1, k - 2] != 0 else 1
-        first = k - size
-        w = drive[first:k, None] * u[None, :]
-        if k < n:
-            w = w + T[first:k, k:] @ states[k:]
-        if size == 1:
-            states[first] = scipy.signal.sosfilt([[0.0, 1.0, 0.0, 1.0, -T[first, first], 0.0]], w[0])
-        else:
-            (t11, t12), (t21, t22) = T[first:k, first:k]
-            den = [1.0, -(t11 + t22), t11 * t22 - t12 * t21]
-            states[first] = (scipy.signal.sosfilt([[0.0, 1.0, -t22, *den]], w[0])
-                             + scipy.signal.sosfilt([[0.0, 0.0, t12, *den]], w[1]))
-            states[first + 1] = (scipy.signal.sosfilt([[0.0, 0.0, t21, *den]], w[0])
-                                 + scipy.signal.sosfilt([[0.0, 1.0, -t11, *den]], w[1]))
-        k = first
-    return (c @ Z) @ states
-
-
-def invariant_zeros(A, B, C, D) -> np.ndarray:
-    """Finite transmission zeros: generalised eigenvalues of the Rosenbrock pencil.
-
-    Solves [A B; C D] v = z [I 0; 0 0] v, which avoids forming the numerator
-    polynomial (rooting it loses the zeros of lightly damped high-order models).
-    """
-    A, B, C, D = _as_siso(A, B, C, D)
-    n = A.shape[0]
-    if n == 0:
-        return np.zeros(0, complex)
-    M = np.block([[A, B], [C, np.array([[D]])]])
-    N = np.zeros((n + 1, n + 1))
-    N[:n, :n] = np.eye(n)
-    values = scipy.linalg.eigvals(M, N)
-    finite = np.isfinite(values) & (np.abs(values) < 1e8)
-    return values[finite]
 
 
 def spectral_radius(A) -> float:
@@ -286,7 +94,7 @@ def gramians(A, B, C) -> tuple[np.ndarray, np.ndarray]:
     W_c = A W_c A^T + B B^T and W_o = A^T W_o A + C^T C (discrete Lyapunov equations),
     symmetrised against round-off.
     """
-    A, B, C, _ = _as_siso(A, B, C, 0.0)
+    A, B, C, _ = as_siso(A, B, C, 0.0)
     wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
     wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
     return (wc + wc.T) / 2, (wo + wo.T) / 2
@@ -320,7 +128,7 @@ def equalise_states(A, B, C, D):
     unchanged, so A keeps its form; only B and C change. A block is a pair of states
     coupled in A; other couplings get the factor of their own states.
     """
-    A, B, C, D = _as_siso(A, B, C, D)
+    A, B, C, D = as_siso(A, B, C, D)
     n = A.shape[0]
     t = np.ones(n)
     i = 0
@@ -373,7 +181,7 @@ def chained_realisation(A, B, C, D):
     B = [2 Re r, -2 Im r] for the residue r of p = a + jb, the block [[a, b], [-b, a]]), a real
     pole alone a 1 x 1 block.
     """
-    A, B, C, D = _as_siso(A, B, C, D)
+    A, B, C, D = as_siso(A, B, C, D)
     modal = modal_form(A, B, C, D)
     if not modal.reliable or modal.poles.size == 0:
         return None
@@ -524,3 +332,60 @@ def balanced_realisation(A, B, C, D, rtol: float = 1e-5):
     reference = frequency_response(A, B, C, D[0, 0], z)
     balanced = _square_root_balance(A, B, C, D, reference, z, rtol)
     return (A, B, C, D) if balanced is None else balanced
+
+
+@dataclass(frozen=True)
+class MinimalBalanced:
+    """A balanced minimal realisation (``minimal_balanced_realisation``) and the Hankel singular values
+    of the system it was computed from: all n of them, largest first, also those of the states left out."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: float
+    hankel_singular_values: np.ndarray
+
+
+def _cholesky_factor(W: np.ndarray) -> np.ndarray:
+    """Upper factor R with W = R^T R, robust to a Gramian that is only semi-definite (then from its
+    eigenvalues clipped at zero)."""
+    try:
+        return scipy.linalg.cholesky(W, lower=False)
+    except np.linalg.LinAlgError:
+        values, vectors = np.linalg.eigh(W)
+        values = np.clip(values, 0.0, None)
+        return (vectors * np.sqrt(values)).T
+
+
+def minimal_balanced_realisation(A, B, C, D, order: int | None = None) -> MinimalBalanced:
+    """The balanced realisation of a stable SISO system without its uncontrollable or unobservable
+    states, optionally truncated to ``order`` states (Moore 1981; square-root algorithm of Laub,
+    Heath, Paige & Ward, IEEE Trans. Autom. Control 32(2), 1987).
+
+    With the Gramians W_c = L_c L_c^T, W_o = L_o L_o^T (``gramians``, Cholesky factors) and the
+    SVD L_o^T L_c = U S V^T, the balancing transformation is T = L_c V S^-1/2 with inverse
+    S^-1/2 U^T L_o^T. States whose Hankel singular value is at most 1e-14 of the largest are
+    always dropped; with ``order`` only the first ``order`` are kept, and the H-infinity error is
+    at most twice the sum of the values left out (Enns' bound).
+
+    The realisation firmware generation (``codegen.realise``) and controller design (``anc.design``)
+    use. Unlike identification's ``balanced_realisation`` it takes the system as given (no
+    ``equalise_states`` first), drops states instead of refusing to balance them, and does not
+    check the result's response: the generated code and the controllers' stored filters are
+    defined by this arithmetic, so the two are kept apart rather than merged.
+    """
+    A = np.asarray(A, float)
+    B = np.asarray(B, float).reshape(-1, 1)
+    C = np.asarray(C, float).reshape(1, -1)
+    wc, wo = gramians(A, B, C)
+    lc = _cholesky_factor(wc).T
+    lo = _cholesky_factor(wo).T
+    U, s, Vt = np.linalg.svd(lo.T @ lc)
+    keep = int(np.sum(s > 1e-14 * s[0])) if s.size and s[0] > 0 else 0
+    if order is not None:
+        keep = min(keep, int(order))
+    s_half = np.sqrt(s[:keep])
+    T = lc @ Vt[:keep].T / s_half
+    T_inv = (U[:, :keep] / s_half).T @ lo.T
+    return MinimalBalanced(A=T_inv @ A @ T, B=T_inv @ B, C=C @ T, D=float(np.asarray(D).reshape(-1)[0]),
+                           hankel_singular_values=s)

@@ -8,11 +8,11 @@ import pytest
 from conftest_codegen import appendix_a_model, model_sweeps
 
 from codegen import __version__
-from codegen.api import Manifest, format_verification_table, generate_firmware
-from codegen.build import build_host, cache_dir
+from codegen.api import format_verification_table, generate_firmware
+from codegen.build import build_host
+from codegen.c_syntax import float_literal
 from codegen.errors import VerificationError
 from codegen.plan import plan_firmware
-from codegen.render import float_literal
 from codegen.verify import verify_host
 
 
@@ -80,18 +80,6 @@ def test_verification_detects_a_changed_coefficient(tmp_path):
     host = build_host("ff", header, tampered)
     with pytest.raises(VerificationError, match="differs from the bit-exact reference"):
         verify_host(plan_firmware(model), host, model_sweeps(model, seconds=0.3))
-
-
-def test_host_build_cached_by_source_hash(tmp_path):
-    manifest = generate_firmware(appendix_a_model("ff"), tmp_path / "ff", variant="q15")
-    header = (tmp_path / "ff" / "ff_filter.h").read_text()
-    source = (tmp_path / "ff" / "ff_filter.c").read_text()
-    build_host("ff", header, source)
-    before = sorted(p.name for p in cache_dir().iterdir())
-    host = build_host("ff", header, source)
-    assert sorted(p.name for p in cache_dir().iterdir()) == before
-    assert host.variants == ("q15",)
-    assert isinstance(manifest, Manifest)
 
 
 def test_unverified_table_shows_predictions(tmp_path):

@@ -7,13 +7,14 @@ import pytest
 from conftest_codegen import appendix_a_model, model_sweeps, random_stable_model
 
 from codegen.api import generate_firmware
+from codegen.build import CmsisPackageFilter
 from codegen.cmsis import (KERNELS, cmsis_q15_reference, design_cmsis, df2t_f32_reference, q15_kernel, q31_kernel,
                            q31x64_kernel)
 from codegen.plan import plan_firmware
 from codegen.realise import realise
 from codegen.reference import float64_reference, from_q15, to_q15
 from codegen.sections import design_cascade
-from codegen.verify import CmsisPackageFilter, snr_db
+from codegen.verify import snr_db
 
 dsp = pytest.importorskip("cmsisdsp", reason="the cmsisdsp package is not installed")
 

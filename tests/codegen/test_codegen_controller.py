@@ -10,9 +10,10 @@ import pytest
 
 from anc import DesignOptions, design
 from anc.controller import Controller
+from codegen.api import generate_controller_firmware
 from codegen.build import build_host
 from codegen.control_loop import FixedStepper, Float32Stepper
-from codegen.controller import FILTER_NAMES, generate_controller_firmware, plan_controller
+from codegen.controller import FILTER_NAMES, plan_controller
 from codegen.errors import CodegenError
 from codegen.reference import fixed_reference, float32_reference, to_q15
 from helmet_anc.firmware_cli import main as firmware_main

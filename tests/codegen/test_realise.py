@@ -1,34 +1,16 @@
-"""Tests of codegen.realise: balanced realisation, truncation, re-discretisation."""
+"""Tests of codegen.realise: truncation, re-discretisation, refusals (the balancing: tests/sysid/core/test_lti.py)."""
 
 import numpy as np
 import pytest
-import scipy.linalg
 from conftest_codegen import appendix_a_model, random_stable_model
 
 from codegen.errors import UnstableModelError
-from codegen.realise import balanced_realisation, hankel_singular_values, realise, rediscretise
+from codegen.realise import realise, rediscretise
 from sysid.core import lti
 from sysid.core.model import Model
 
 
-class TestBalancedRealisation:
-    @pytest.mark.parametrize("path", ["fb", "ff"])
-    def test_gramians_equal_and_diagonal(self, path):
-        m = appendix_a_model(path)
-        A, B, C, _D, hsv = balanced_realisation(m.A, m.B, m.C, m.D)
-        wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
-        wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
-        np.testing.assert_allclose(wc, np.diag(hsv), atol=1e-8 * hsv[0])
-        np.testing.assert_allclose(wo, np.diag(hsv), atol=1e-8 * hsv[0])
-        np.testing.assert_allclose(hsv, hankel_singular_values(m.A, m.B, m.C), rtol=1e-6)
-
-    def test_same_transfer_function(self):
-        m = appendix_a_model("fb")
-        A, B, C, D, _ = balanced_realisation(m.A, m.B, m.C, m.D)
-        z = np.exp(1j * np.linspace(0.001, np.pi, 200))
-        np.testing.assert_allclose(lti.frequency_response(A, B, C, D, z),
-                                   lti.frequency_response(m.A, m.B, m.C, m.D, z), rtol=1e-8)
-
+class TestTruncation:
     def test_truncation_error_within_enns_bound(self):
         m = random_stable_model(3, 8, radius_max=0.99)
         full = realise(m)

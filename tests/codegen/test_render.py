@@ -1,13 +1,13 @@
-"""Rendering: no model text can inject C, identifiers are safe and unique per output."""
+"""Rendering: no model text can inject C, include guards are unique per output (names: test_c_syntax.py)."""
 
 import subprocess
 
 import pytest
 from conftest_codegen import appendix_a_model, have
 
-from codegen.errors import InvalidNameError
+from codegen.context import build_context
 from codegen.plan import plan_firmware
-from codegen.render import build_context, comment_text, render_files, validate_name
+from codegen.render import render_files
 
 # A model file name crafted to end the comment, splice a line (backslash-newline and the
 # trigraph ??/ for a backslash) and declare a symbol.
@@ -22,12 +22,6 @@ def _files(name="fb", provenance_extra=None):
     return render_files(context)
 
 
-def test_comment_text_keeps_only_whitelisted_characters():
-    text = comment_text(HOSTILE)
-    assert not set(text) & set("\\\n?*/#{};")
-    assert text.startswith("m.json")
-
-
 def test_hostile_model_text_injects_nothing(tmp_path):
     files = _files(provenance_extra={"file": HOSTILE, "hash": HOSTILE, "path": "fb*/ int injected_d;"})
     for text in files.values():
@@ -40,12 +34,6 @@ def test_hostile_model_text_injects_nothing(tmp_path):
                    cwd=tmp_path, check=True, timeout=120)
     symbols = subprocess.run(["nm", "fb.o"], cwd=tmp_path, capture_output=True, text=True, check=True).stdout
     assert "injected" not in symbols
-
-
-@pytest.mark.parametrize("name", ["strtok", "memcpy", "int", "static", "int32_t", "isfoo", "FF", "Fb", "_fb", "1fb"])
-def test_reserved_library_and_upper_case_names_refused(name):
-    with pytest.raises(InvalidNameError, match="--name"):
-        validate_name(name)
 
 
 def test_include_guards_differ_per_name_and_headers_combine(tmp_path):

@@ -12,11 +12,11 @@ import pytest
 import scipy.signal
 from conftest_codegen import appendix_a_model
 
-from codegen.build import build_host
+from codegen.build import CmsisPackageFilter, build_host
+from codegen.context import build_context
 from codegen.plan import plan_firmware
 from codegen.reference import delay_signal, from_q15, to_q15
-from codegen.render import build_context, render_files
-from codegen.verify import CmsisPackageFilter
+from codegen.render import render_files
 from sysid.core.sections import cascade_response, peak_grid
 
 N = 24000  # longer than the FB model's slowest time constant (about 11600 samples)

@@ -25,9 +25,10 @@ from anc.closed_loop import measured_attenuation, run_closed_loop
 from anc.controller import Controller
 from anc.disturbance import default_disturbance, synthesize
 from anc.prediction import band_centres
+from codegen.api import generate_controller_firmware
 from codegen.build import HOST_CFLAGS
 from codegen.control_loop import Limits, board_loop
-from codegen.controller import generate_controller_firmware, plan_controller
+from codegen.controller import plan_controller
 from codegen.reference import to_q15
 from sysid.core.model import Model
 from sysid.core.plants import appendix_a_model

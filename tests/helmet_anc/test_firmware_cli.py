@@ -8,8 +8,8 @@ import sys
 import pytest
 from conftest_codegen import appendix_a_model
 
+from codegen.c_syntax import validate_name
 from codegen.errors import InvalidNameError
-from codegen.render import validate_name
 from helmet_anc.firmware_cli import build_parser, main
 from sysid.core.model import Model
 

@@ -1,9 +1,11 @@
-"""State-space helpers (sysid.core.lti): balanced realisation and state equalisation."""
+"""State-space realisations (sysid.core.lti): balanced realisations, truncation and state equalisation."""
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from sysid.core import lti
+from sysid.core.plants import appendix_a_model
 from sysid.random_plant import random_plant
 
 Z = np.exp(1j * np.linspace(0.001, np.pi - 0.001, 400))
@@ -175,3 +177,43 @@ def test_a_state_that_carries_nothing_is_left_out_by_balanced_truncation():
     full = lti.balanced_truncation(plant.A, plant.B, plant.C, plant.D)
     np.testing.assert_allclose(np.abs(full[0]), np.abs(lti.balanced_realisation(plant.A, plant.B, plant.C, plant.D)[0]),
                                atol=1e-8)
+
+
+class TestMinimalBalancedRealisation:
+    @pytest.mark.parametrize("path", ["fb", "ff"])
+    def test_gramians_equal_and_diagonal(self, path):
+        m = appendix_a_model(path)
+        balanced = lti.minimal_balanced_realisation(m.A, m.B, m.C, m.D)
+        A, B, C, hsv = balanced.A, balanced.B, balanced.C, balanced.hankel_singular_values
+        wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+        wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
+        np.testing.assert_allclose(wc, np.diag(hsv), atol=1e-8 * hsv[0])
+        np.testing.assert_allclose(wo, np.diag(hsv), atol=1e-8 * hsv[0])
+        np.testing.assert_allclose(hsv, lti.hankel_singular_values(m.A, m.B, m.C), rtol=1e-6)
+
+    def test_same_transfer_function(self):
+        m = appendix_a_model("fb")
+        balanced = lti.minimal_balanced_realisation(m.A, m.B, m.C, m.D)
+        z = np.exp(1j * np.linspace(0.001, np.pi, 200))
+        np.testing.assert_allclose(lti.frequency_response(balanced.A, balanced.B, balanced.C, balanced.D, z),
+                                   lti.frequency_response(m.A, m.B, m.C, m.D, z), rtol=1e-8)
+
+    def test_an_unobservable_state_is_left_out(self):
+        # The second state is driven but never seen: G(z) = 1 / (z - 0.5), one state.
+        A, B, C = np.diag([0.5, 0.8]), np.ones((2, 1)), np.array([[1.0, 0.0]])
+        balanced = lti.minimal_balanced_realisation(A, B, C, 0.0)
+        assert balanced.A.shape == (1, 1) and balanced.A[0, 0] == pytest.approx(0.5)
+        assert balanced.B[0, 0] * balanced.C[0, 0] == pytest.approx(1.0)
+        # Every Hankel singular value of the given system, the one left out (zero) included.
+        assert balanced.hankel_singular_values.shape == (2,)
+        assert balanced.hankel_singular_values[0] == pytest.approx(1.0 / (1.0 - 0.25))
+
+    def test_order_keeps_the_largest_values_within_enns_bound(self):
+        m = appendix_a_model("fb")
+        full = lti.minimal_balanced_realisation(m.A, m.B, m.C, m.D)
+        cut = lti.minimal_balanced_realisation(m.A, m.B, m.C, m.D, order=3)
+        assert cut.A.shape == (3, 3) and cut.D == full.D
+        np.testing.assert_array_equal(cut.hankel_singular_values, full.hankel_singular_values)
+        error = np.abs(lti.frequency_response(cut.A, cut.B, cut.C, cut.D, Z)
+                       - lti.frequency_response(full.A, full.B, full.C, full.D, Z))
+        assert error.max() <= 2 * full.hankel_singular_values[3:].sum() * (1 + 1e-6)
