@@ -12,19 +12,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from sysid.core.errors import HelmetAncError
-from sysid.core.thresholds import IDENTIFICATION_BAND, TRANSIENT_S
+from sysid.core.thresholds import IDENTIFICATION_BAND, MODEST_GAMMAS, MODEST_ORDERS, TRANSIENT_S, VALIDATION_BAND
 from sysid.diagnose import diagnose
 from sysid.estimation.grid import GridResult, grid_search
 from sysid.estimation.spectra import Spectra, estimate_spectra
 from sysid.findings import DiagnosisContext
 from sysid.io.recordings import Recording, check_same_rate
 from sysid.validation.compare import Comparison, compare
-from sysid.validation.sweeps import VALIDATION_BAND, sweep_spectrum
+from sysid.validation.sweeps import sweep_spectrum
 
 __all__ = ["GRID_CHOICES", "MODEST_GAMMAS", "MODEST_ORDERS", "ReportData", "finding_dicts", "prepare_report_data"]
 
-MODEST_GAMMAS = tuple(range(10, 1001, 90))
-MODEST_ORDERS = tuple(range(1, 13))
 GRID_CHOICES = ("modest", "skip")
 
 
