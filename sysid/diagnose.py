@@ -3,9 +3,10 @@
 ``diagnose(model, noise, sweeps)`` compares the model with the sweeps
 (``sysid.validation.compare``) and runs the detector of every effect in the registry
 (``sysid.effects``; the detectors live in ``sysid.findings``), each after the
-detectors of the effects it declares it needs, reading only the shared values it
-declares it uses (``sysid.findings.uses``: the noise recording's prediction, the
-session's one line search, ...; each computed once per diagnosis by its provider).
+detectors of the effects it declares it needs, reading only their findings
+(``DiagnosisContext.finding``) and the shared values it declares it uses
+(``sysid.findings.uses``: the noise recording's prediction, the session's one line
+search, ...; each computed once per diagnosis by its provider).
 The built-in effects:
 
 - data quality, straight from the recordings: ``dc-offset``, ``clipping``;
@@ -107,11 +108,13 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         for detector in registry.detector_order():
             # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
             ctx.readable = getattr(detector, "uses", None)
+            # The findings it reads are those of the effects it needs (all of them for ``needs_all``).
+            ctx.readable_findings = registry.findings_read_by(detector)
             clock = time.process_time()
             try:
                 found = detector(ctx)
             finally:
-                ctx.readable = None
+                ctx.readable = ctx.readable_findings = None
             cpu_seconds[getattr(detector, "__name__", str(detector))] = time.process_time() - clock
             findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))

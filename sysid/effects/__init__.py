@@ -48,8 +48,9 @@ class Effect:
 
     ``detect(ctx)`` returns one finding or a list (one detector may judge several
     effects, e.g. the series factors' family fit); ``needs`` names the effects
-    whose findings it reads from ``ctx.findings`` (they run first); ``needs_all``:
-    it reads every other finding (under-modelled, asked last). The values the detector
+    whose findings it reads (``ctx.finding``, ``ctx.findings_of``: they run first, and
+    no other finding is readable while it runs); ``needs_all``: it reads every other
+    finding (under-modelled, asked last). The values the detector
     shares with others (the session's line search, the noise recording's prediction: each
     computed once per diagnosis by a named provider) it declares itself with
     ``sysid.findings.uses``; ``diagnose`` lets it read only those. ``build(model, noise,

@@ -250,8 +250,9 @@ def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
 
 
 def series_factor_finding(ctx: DiagnosisContext):
-    """The significant series-factor finding among the context's findings so far, or None."""
-    return next((f for f in ctx.findings if f["significant"] and f["effect"] in FAMILIES), None)
+    """The significant series-factor finding among the context's findings so far, or None (read by the
+    detectors that declare they need the series factors)."""
+    return next((f for f in ctx.findings_of(*FAMILIES) if f["significant"]), None)
 
 
 def has_series_factor(ctx: DiagnosisContext) -> bool:

@@ -151,7 +151,7 @@ def recording_change(ctx: DiagnosisContext) -> dict:
     names = list(levels)
     # A clipped recording's levels are the clipper's, not the path's (the clipping finding names it, also
     # where a hum after the clipper hides the flat tops from the histogram).
-    clipped = any(f["effect"] == "clipping" and f["significant"] for f in ctx.findings) or any(
+    clipped = any(f["significant"] for f in ctx.findings_of("clipping")) or any(
         clipped_samples(x).fraction > 0 for r in (ctx.noise, *ctx.sweeps) for x in (r.u, r.y))
     if clipped or np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
         return {"changed": False, "pairs": {}, "odd_one_out": None, "change_db": 0.0}
