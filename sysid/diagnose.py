@@ -41,7 +41,7 @@ from . import effects as registry
 from .core.errors import IdentificationError
 from .core.model import Model
 from .core.thresholds import TRANSIENT_S
-from .findings import Finding
+from .findings import DiagnosisContext, Finding
 from .findings.context import detector_context
 from .io.recordings import Recording, check_same_rate
 from .validation.compare import compare
@@ -67,13 +67,17 @@ DETECTORS = _Detectors()
 class Diagnosis(list):
     """The ranked findings (``Finding`` records) with the comparison they were based on; ``seconds``
     the wall time of ``diagnose``, ``cpu_seconds`` the CPU time (s) of the comparison and of each
-    detector by name, the shared values counted where first read."""
+    detector by name, the shared values counted where first read; ``context`` the
+    ``DiagnosisContext`` the detectors read, with the shared values computed during the diagnosis
+    (``context.values``: what the report's figures draw)."""
 
-    def __init__(self, findings, comparison, seconds: float, cpu_seconds: dict | None = None):
+    def __init__(self, findings, comparison, seconds: float, cpu_seconds: dict | None = None,
+                 context: DiagnosisContext | None = None):
         super().__init__(findings)
         self.comparison = comparison
         self.seconds = seconds
         self.cpu_seconds = cpu_seconds or {}
+        self.context = context
 
     @property
     def significant(self) -> list[Finding]:
@@ -119,7 +123,7 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
             findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))
     findings[:] = _leading_first(findings)
-    return Diagnosis(findings, comparison, time.perf_counter() - t0, cpu_seconds)
+    return Diagnosis(findings, comparison, time.perf_counter() - t0, cpu_seconds, ctx)
 
 
 def _leading_first(findings: list[Finding]) -> list[Finding]:
