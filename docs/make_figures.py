@@ -26,7 +26,6 @@ from report.figures import error_bands_figure, finding_figure, model_bode_figure
 from sysid.core.plants import appendix_a_model
 from sysid.diagnose import diagnose
 from sysid.estimation.spectra import estimate_spectra
-from sysid.findings import DiagnosisContext
 from sysid.identify import IdentificationOptions, identify
 from sysid.simulate import SessionSpec, simulate_session
 from sysid.validation.compare import compare
@@ -59,10 +58,10 @@ def make_figures(outdir: Path) -> list[Path]:
 
     findings = diagnose(lacking, delayed.noise, delayed.sweeps, comparison=comparison)
     delay = next(f for f in findings if f["effect"] == "delay")
-    context = DiagnosisContext(lacking, delayed.noise, delayed.sweeps, comparison)
     spectra = estimate_spectra(delayed.noise.trimmed(3.0))
     written.append(outdir / "ff-delay-evidence.png")
-    finding_figure(delay, context, spectra).savefig(written[-1], dpi=DPI, metadata=PNG_METADATA)
+    # Drawn from the diagnosis's own context: the delay scan its finding was decided on.
+    finding_figure(delay, findings.context, spectra).savefig(written[-1], dpi=DPI, metadata=PNG_METADATA)
     return written
 
 

@@ -4,7 +4,10 @@ With an ``Identification`` the report reuses its spectra, grid and seed model. W
 model and recordings only, the spectra are re-estimated (H1), and the seed's grid is
 recomputed over a modest range (``MODEST_GAMMAS`` x ``MODEST_ORDERS``: the picture of
 appendix C at a fraction of the cost) or skipped (``grid="skip"``) with a note that
-says why.
+says why. The findings' figures read the detectors' context: a ``Diagnosis``'s own (the
+shared values its detectors computed), or for findings given without it one built as
+``diagnose`` builds it (``sysid.findings.context.detector_context``: the recordings as
+the model sees them), whose shared values are computed when a figure first reads them.
 """
 
 from __future__ import annotations
@@ -12,19 +15,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from sysid.core.errors import HelmetAncError
-from sysid.core.thresholds import IDENTIFICATION_BAND, TRANSIENT_S
+from sysid.core.thresholds import IDENTIFICATION_BAND, MODEST_GAMMAS, MODEST_ORDERS, TRANSIENT_S, VALIDATION_BAND
 from sysid.diagnose import diagnose
 from sysid.estimation.grid import GridResult, grid_search
 from sysid.estimation.spectra import Spectra, estimate_spectra
 from sysid.findings import DiagnosisContext
+from sysid.findings.context import detector_context
 from sysid.io.recordings import Recording, check_same_rate
 from sysid.validation.compare import Comparison, compare
-from sysid.validation.sweeps import VALIDATION_BAND, sweep_spectrum
+from sysid.validation.sweeps import sweep_spectrum
 
 __all__ = ["GRID_CHOICES", "MODEST_GAMMAS", "MODEST_ORDERS", "ReportData", "finding_dicts", "prepare_report_data"]
 
-MODEST_GAMMAS = tuple(range(10, 1001, 90))
-MODEST_ORDERS = tuple(range(1, 13))
 GRID_CHOICES = ("modest", "skip")
 
 
@@ -73,7 +75,9 @@ def prepare_report_data(model, noise: Recording, sweeps: list[Recording], identi
     comparison = getattr(findings, "comparison", None) or compare(model, sweeps)
     if findings is None:
         findings = diagnose(model, noise, sweeps, transient_s=transient_s, comparison=comparison)
-    context = DiagnosisContext(model, noise, sweeps, comparison, transient_s)
+    context = getattr(findings, "context", None)
+    if context is None:
+        context = detector_context(model, noise, sweeps, comparison, transient_s)
     seed_model = None
     if identification is not None:
         spectra = identification.spectra

@@ -4,6 +4,11 @@
 its effect names in the registry (``sysid.effects``); an effect without a dedicated plot gets the model's
 frequency-response mismatch against the measurement, with the finding's frequencies
 marked. ``refinement_figure`` draws ``model.history`` as a staircase.
+
+A plot runs no detector: what a detector computed it reads from the diagnosis's context
+as the shared value the detector read (``DiagnosisContext.value``: ``"delay-scan"``, the
+delay scan's costs; ``"segments"``, the noise recording's per-segment responses), so a
+figure shows the numbers its finding was decided on.
 """
 
 from __future__ import annotations
@@ -18,8 +23,6 @@ from sysid.core import structures
 from sysid.core.thresholds import IDENTIFICATION_BAND
 from sysid.estimation.spectra import Spectra, response
 from sysid.findings import DiagnosisContext
-from sysid.findings.delay import scan_delay
-from sysid.findings.variation import segment_responses
 
 from .signals import instantaneous_frequency
 from .style import COLORS, db, log_frequency_axis, new_figure
@@ -52,11 +55,15 @@ def _finish_frequency_axes(axes, finding: dict) -> None:
 
 
 def _delay(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
-    """Fixed-pole fit cost against the total delay, and the phase of measurement over model with the delay line."""
-    best, costs = scan_delay(ctx)
+    """Fixed-pole fit cost against the total delay, and the phase of measurement over model with the delay line.
+
+    The costs are the delay scan's (the shared value ``"delay-scan"``: the best total delay and the
+    cost per total delay 0..delay + ``MAX_EXTRA_DELAY``, NaN where the scan did not evaluate it).
+    """
+    best, costs = ctx.value("delay-scan")
     figure, axes = new_figure(1, 2, height=3.2, dpi=dpi)
-    delays = np.arange(costs.size)
-    axes[0].semilogy(delays, costs / costs.min(), color="black", lw=1.0)
+    delays = np.flatnonzero(np.isfinite(costs))
+    axes[0].semilogy(delays, costs[delays] / costs[delays].min(), ".-", color="black", lw=1.0, ms=3)
     axes[0].axvline(ctx.model.delay, color=COLORS["model"], ls="--", lw=1.0, label=f"model's delay {ctx.model.delay}")
     axes[0].plot(best, 1.0, "*", color=COLORS["seed"], ms=12, label=f"best total delay {best}")
     axes[0].set_xlabel("total delay (samples)")
@@ -143,8 +150,9 @@ def _input_noise(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: fl
 
 
 def _variation(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
-    """Magnitude of the H1 estimate of each segment of the noise recording, and each segment's delay."""
-    f, responses, _, centres = segment_responses(ctx)[:4]
+    """Magnitude of the H1 estimate of each segment of the noise recording, and each segment's delay (the
+    shared value ``"segments"`` the clock-drift and time-variation detectors read)."""
+    f, responses, _, centres = ctx.value("segments")[:4]
     figure, axes = new_figure(1, 2, height=3.2, dpi=dpi)
     inside = (f >= _BAND[0]) & (f <= _BAND[1])
     colours = [(0.1 + 0.8 * k / max(len(responses) - 1, 1), 0.3, 0.6) for k in range(len(responses))]

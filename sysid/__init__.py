@@ -7,36 +7,46 @@ and small dataclasses, so a notebook needs no files::
     session = simulate_session(SessionSpec(path="ff", seed=1))
     result = identify(session.noise, session.sweeps, path="ff")
     result.model.save("ff_model.json")
+
+The names below are imported from their modules when first read (PEP 562, as scipy
+does): ``import sysid.simulate`` or ``import sysid.core.model`` loads what that
+module needs, not identification, diagnosis and refinement behind the facade.
 """
 
+import importlib as _importlib
+import sys as _sys
+import types as _types
+
 from . import _moved
-from .core.errors import HelmetAncError, IdentificationError, ModelError, RecordingError
-from .core.model import Model
-from .core.plants import appendix_a_model
-from .diagnose import diagnose, format_findings
-from .estimation.grid import GridResult, grid_search
-from .estimation.spectra import estimate_spectra, parzen_lag_window, response, smooth_spectra, smoothed_response
-from .estimation.subspace import SubspaceDecomposition, subspace_fit
-from .estimation.uncertainty import UncertaintyBand, frequency_response_band
-from .identify import Identification, IdentificationOptions, identify
-from .io.recordings import (Recording, RecordingFile, RecordingWarning, check_same_rate, load_recording, open_recording,
-                            recording_from_arrays)
-from .refine import Refinement, format_refinement, refine, refine_auto
-from .simulate import Session, SessionSpec, simulate_session, write_session
-from .validation.compare import Comparison, compare, format_comparison
-from .validation.sweeps import noise_floor, simulated_rms
 
 __version__ = "0.1.0"
 
 _moved.install()
 
-
-def __getattr__(name: str):
-    # ``report`` (the report is the top-level package ``report`` now), through the old path's shim.
-    if name == "report":
-        import importlib
-        return importlib.import_module("report")
-    raise AttributeError(f"module 'sysid' has no attribute {name!r}")
+# Public name -> the module that defines it.
+_HOMES = {
+    "sysid.core.errors": ("HelmetAncError", "IdentificationError", "ModelError", "RecordingError"),
+    "sysid.core.model": ("Model",),
+    "sysid.core.plants": ("appendix_a_model",),
+    "sysid.diagnose": ("diagnose", "format_findings"),
+    "sysid.estimation.grid": ("GridResult", "grid_search"),
+    "sysid.estimation.spectra": ("estimate_spectra", "parzen_lag_window", "response", "smooth_spectra",
+                                 "smoothed_response"),
+    "sysid.estimation.subspace": ("SubspaceDecomposition", "subspace_fit"),
+    "sysid.estimation.uncertainty": ("UncertaintyBand", "frequency_response_band"),
+    "sysid.identify": ("Identification", "IdentificationOptions", "identify"),
+    "sysid.io.recordings": ("Recording", "RecordingFile", "RecordingWarning", "check_same_rate", "load_recording",
+                            "open_recording", "recording_from_arrays"),
+    "sysid.refine": ("Refinement", "format_refinement", "refine", "refine_auto"),
+    "sysid.simulate": ("Session", "SessionSpec", "simulate_session", "write_session"),
+    "sysid.validation.compare": ("Comparison", "compare", "format_comparison"),
+    "sysid.validation.sweeps": ("noise_floor", "simulated_rms"),
+}
+_HOME = {name: module for module, names in _HOMES.items() for name in names}
+# The subpackages (and ``simulate``) that ``import sysid`` used to bind as attributes.
+_SUBMODULES = ("core", "effects", "estimation", "findings", "io", "refits", "simulate", "validation")
+# The modules named as a function of the facade: ``sysid.diagnose`` is the function.
+_SHADOWED = ("diagnose", "identify", "refine")
 
 __all__ = [
     "HelmetAncError", "IdentificationError", "ModelError", "RecordingError", "RecordingWarning",
@@ -48,3 +58,34 @@ __all__ = [
     "noise_floor", "simulated_rms", "UncertaintyBand", "frequency_response_band", "Comparison", "compare", "format_comparison", "diagnose", "format_findings",
     "Refinement", "refine", "refine_auto", "format_refinement", "__version__",
 ]
+
+
+def __getattr__(name: str):
+    if name in _HOME:
+        value = getattr(_importlib.import_module(_HOME[name]), name)
+        globals()[name] = value
+        return value
+    if name in _SUBMODULES:
+        return _importlib.import_module(f"{__name__}.{name}")
+    # ``report`` (the report is the top-level package ``report`` now), through the old path's shim.
+    if name == "report":
+        return _importlib.import_module("report")
+    raise AttributeError(f"module 'sysid' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__) | set(_SUBMODULES))
+
+
+class _Facade(_types.ModuleType):
+    """The package module: a function of the facade keeps its name when the module of the same name
+    (``sysid.diagnose``, ``sysid.identify``, ``sysid.refine``) is imported."""
+
+    def __setattr__(self, name: str, value) -> None:
+        # The import system binds a loaded submodule on its package; ``sysid.diagnose`` stays the function.
+        if name in _SHADOWED and isinstance(value, _types.ModuleType) and value.__name__ == f"{__name__}.{name}":
+            return
+        super().__setattr__(name, value)
+
+
+_sys.modules[__name__].__class__ = _Facade

@@ -3,9 +3,10 @@
 ``diagnose(model, noise, sweeps)`` compares the model with the sweeps
 (``sysid.validation.compare``) and runs the detector of every effect in the registry
 (``sysid.effects``; the detectors live in ``sysid.findings``), each after the
-detectors of the effects it declares it needs, reading only the shared values it
-declares it uses (``sysid.findings.uses``: the noise recording's prediction, the
-session's one line search, ...; each computed once per diagnosis by its provider).
+detectors of the effects it declares it needs, reading only their findings
+(``DiagnosisContext.finding``) and the shared values it declares it uses
+(``sysid.findings.uses``: the noise recording's prediction, the session's one line
+search, ...; each computed once per diagnosis by its provider).
 The built-in effects:
 
 - data quality, straight from the recordings: ``dc-offset``, ``clipping``;
@@ -40,7 +41,7 @@ from . import effects as registry
 from .core.errors import IdentificationError
 from .core.model import Model
 from .core.thresholds import TRANSIENT_S
-from .findings import Finding
+from .findings import DiagnosisContext, Finding
 from .findings.context import detector_context
 from .io.recordings import Recording, check_same_rate
 from .validation.compare import compare
@@ -66,13 +67,17 @@ DETECTORS = _Detectors()
 class Diagnosis(list):
     """The ranked findings (``Finding`` records) with the comparison they were based on; ``seconds``
     the wall time of ``diagnose``, ``cpu_seconds`` the CPU time (s) of the comparison and of each
-    detector by name, the shared values counted where first read."""
+    detector by name, the shared values counted where first read; ``context`` the
+    ``DiagnosisContext`` the detectors read, with the shared values computed during the diagnosis
+    (``context.values``: what the report's figures draw)."""
 
-    def __init__(self, findings, comparison, seconds: float, cpu_seconds: dict | None = None):
+    def __init__(self, findings, comparison, seconds: float, cpu_seconds: dict | None = None,
+                 context: DiagnosisContext | None = None):
         super().__init__(findings)
         self.comparison = comparison
         self.seconds = seconds
         self.cpu_seconds = cpu_seconds or {}
+        self.context = context
 
     @property
     def significant(self) -> list[Finding]:
@@ -107,16 +112,18 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         for detector in registry.detector_order():
             # A detector that declares nothing (a user's effect written before ``uses``) reads freely.
             ctx.readable = getattr(detector, "uses", None)
+            # The findings it reads are those of the effects it needs (all of them for ``needs_all``).
+            ctx.readable_findings = registry.findings_read_by(detector)
             clock = time.process_time()
             try:
                 found = detector(ctx)
             finally:
-                ctx.readable = None
+                ctx.readable = ctx.readable_findings = None
             cpu_seconds[getattr(detector, "__name__", str(detector))] = time.process_time() - clock
             findings.extend(found if isinstance(found, list) else [found])
     findings.sort(key=lambda f: (not f.significant, -f.score))
     findings[:] = _leading_first(findings)
-    return Diagnosis(findings, comparison, time.perf_counter() - t0, cpu_seconds)
+    return Diagnosis(findings, comparison, time.perf_counter() - t0, cpu_seconds, ctx)
 
 
 def _leading_first(findings: list[Finding]) -> list[Finding]:

@@ -15,7 +15,11 @@ effect a user writes is one module that builds an ``Effect`` and calls
 ``register`` (README, "Your own effect"), and is then simulated, diagnosed and
 refined like the built-in ones. The built-in effects register on import of this
 package, in the order below, which is also the order their detectors run in
-when ``needs`` does not say otherwise.
+when ``needs`` does not say otherwise. They name their detectors and builders by
+reference (``"sysid.refits:add_delay"``, ``sysid.effects.references``), resolved
+when first read: the registry loads neither ``sysid.findings`` nor ``sysid.refits``
+until ``diagnose`` or ``refine`` asks for them, so ``sysid.simulate`` stands without
+the estimation stack.
 """
 
 from __future__ import annotations
@@ -26,9 +30,10 @@ from typing import Callable
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import HelmetAncError
+from .references import Resolved
 
 __all__ = ["Effect", "register", "unregister", "registered", "get", "effects", "names", "detector_order",
-           "FIGURES"]
+           "findings_read_by", "FIGURES"]
 
 # The figure kinds of the report (``report.diagnosis_figures``): delay-scan (fit cost against
 # the delay), series-factor (measured/model response with the fitted factor over it), harmonics
@@ -43,8 +48,9 @@ class Effect:
 
     ``detect(ctx)`` returns one finding or a list (one detector may judge several
     effects, e.g. the series factors' family fit); ``needs`` names the effects
-    whose findings it reads from ``ctx.findings`` (they run first); ``needs_all``:
-    it reads every other finding (under-modelled, asked last). The values the detector
+    whose findings it reads (``ctx.finding``, ``ctx.findings_of``: they run first, and
+    no other finding is readable while it runs); ``needs_all``: it reads every other
+    finding (under-modelled, asked last). The values the detector
     shares with others (the session's line search, the noise recording's prediction: each
     computed once per diagnosis by a named provider) it declares itself with
     ``sysid.findings.uses``; ``diagnose`` lets it read only those. ``build(model, noise,
@@ -66,26 +72,36 @@ class Effect:
     random parameters in effects.md's ranges (the tests' and benchmarks' sessions). ``kind``: "structure" (a part of the
     plant's model), "correction" (of the data: applied first by ``refine --auto``),
     "disturbance" (explains part of the output, not the plant) or "report" (named only).
+
+    Each of the functions (``detect``, ``build``, ``complete``, ``correct``, ``auto_params``,
+    ``factor``, ``random``) may be given as a reference ``"package.module:attribute"`` instead
+    (``sysid.effects.references``): it is imported when the field is first read, and reads
+    as the function from then on.
     """
 
     name: str
     summary: str
     simulate_params: tuple[ParameterSpec, ...] | None = None
     refine_params: tuple[ParameterSpec, ...] | None = None
-    detect: Callable | None = None
+    detect: Callable | str | None = Resolved()
     needs: tuple[str, ...] = ()
     needs_all: bool = False
-    build: Callable | None = None
-    complete: Callable | None = None
-    correct: Callable | None = None
+    build: Callable | str | None = Resolved()
+    complete: Callable | str | None = Resolved()
+    correct: Callable | str | None = Resolved()
     time_base: bool = False
     accept: str = "in-band"
     not_refinable: str = ""
-    auto_params: Callable[[dict], dict] | None = None
+    auto_params: Callable[[dict], dict] | str | None = Resolved()
     kind: str = "structure"
-    factor: Callable | None = None
+    factor: Callable | str | None = Resolved()
     figure: str = "mismatch"
-    random: Callable | None = None
+    random: Callable | str | None = Resolved()
+
+    def has(self, name: str) -> bool:
+        """Whether the function ``name`` (``"detect"``, ``"build"``, ...) is given, without importing
+        what a reference names."""
+        return self.__dict__[name] is not None
 
     def __post_init__(self):
         if self.figure not in FIGURES:
@@ -94,16 +110,16 @@ class Effect:
             raise HelmetAncError(f"effect {self.name}: kind must be structure, correction, disturbance or report")
         if self.accept not in ("in-band", "full-band", "not-worse"):
             raise HelmetAncError(f"effect {self.name}: accept must be in-band, full-band or not-worse")
-        if self.correct is not None and self.kind != "correction":
+        if self.has("correct") and self.kind != "correction":
             raise HelmetAncError(f"effect {self.name}: only a correction (kind 'correction') has a correct")
-        if self.time_base and self.correct is None:
+        if self.time_base and not self.has("correct"):
             raise HelmetAncError(f"effect {self.name}: time_base belongs to a data correction (one with a correct)")
-        if self.build is not None and self.refine_params is None:
+        if self.has("build") and self.refine_params is None:
             raise HelmetAncError(f"effect {self.name}: a structure needs its refine_params (may be empty)")
 
     @property
     def refinable(self) -> bool:
-        return self.build is not None
+        return self.has("build")
 
     @property
     def simulated(self) -> bool:
@@ -161,14 +177,16 @@ def names() -> list[str]:
 
 def detector_order() -> list[Callable]:
     """The distinct detectors, each after the detectors of the effects it needs; those that read
-    every finding (``needs_all``) last. Registration order breaks ties."""
+    every finding (``needs_all``) last. Registration order breaks ties. The detectors given by
+    reference are resolved (imported) here."""
     ordered: list[Callable] = []
     done: set[str] = set()
-    pending = [e for e in _REGISTRY.values() if e.detect is not None]
+    pending = [e for e in _REGISTRY.values() if e.has("detect")]
     last = [e for e in pending if e.needs_all]
     pending = [e for e in pending if not e.needs_all]
     while pending:
-        ready = next((e for e in pending if all(n in done or _REGISTRY[n].detect is None for n in e.needs)), None)
+        ready = next((e for e in pending
+                      if all(n in done or not _REGISTRY[n].has("detect") for n in e.needs)), None)
         if ready is None:
             raise HelmetAncError("effects' detectors need each other in a cycle: " + ", ".join(e.name for e in pending))
         pending.remove(ready)
@@ -180,6 +198,15 @@ def detector_order() -> list[Callable]:
         if effect.detect not in ordered:
             ordered.append(effect.detect)
     return ordered
+
+
+def findings_read_by(detector: Callable) -> tuple[str, ...] | None:
+    """The effects whose findings ``detector`` may read: those the effects it detects declare in
+    ``needs`` (in registration order), or None (every finding) when one of them declares ``needs_all``."""
+    judged = [e for e in _REGISTRY.values() if e.has("detect") and e.detect is detector]
+    if any(e.needs_all for e in judged):
+        return None
+    return tuple(dict.fromkeys(need for e in judged for need in e.needs))
 
 
 def _load_builtin() -> None:

@@ -10,8 +10,6 @@ corrected by leaving the clipped stretches out of identification and validation
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from ..findings.data_quality import clipping_finding
-from ..refits import add_clipping, with_clipping
 from . import Effect, register
 
 __all__ = ["CLIPPING"]
@@ -26,5 +24,6 @@ CLIPPING = register(Effect(
     # Clean ear-signal peak relative to the clip level; a preamplifier flat-tops at level (FS),
     # the 16-bit converter at 1.
     simulate_params=(ParameterSpec("peak", 1.3, 1.0, 8.0), ParameterSpec("level", 1.0, 0.01, 1.0)),
-    refine_params=(), detect=clipping_finding, build=add_clipping, correct=with_clipping, auto_params=lambda p: {},
+    refine_params=(), detect="sysid.findings.data_quality:clipping_finding", build="sysid.refits:add_clipping",
+    correct="sysid.refits:with_clipping", auto_params=lambda p: {},
     kind="correction", figure="levels", random=_random))

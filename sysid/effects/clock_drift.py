@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import IdentificationError
-from ..findings.variation import clock_drift_finding
-from ..refits import add_clock_drift, with_clock_drift
 from . import Effect, register
 
 __all__ = ["CLOCK_DRIFT"]
@@ -19,6 +17,7 @@ __all__ = ["CLOCK_DRIFT"]
 
 def _complete(params, ctx, before):
     if params["ppm"] is None:
+        from ..findings.variation import clock_drift_finding  # the detectors load when first asked
         found = clock_drift_finding(ctx)
         if not found["significant"]:
             raise IdentificationError("--add clock-drift: the noise recording shows no clock drift; give clock-drift:PPM")
@@ -35,5 +34,7 @@ CLOCK_DRIFT = register(Effect(
     name="clock-drift", summary="ear clock against input clock, parts per million (positive: ear fast)",
     simulate_params=(ParameterSpec("ppm", 50.0, -2000.0, 2000.0),),
     refine_params=(ParameterSpec("ppm", None, -5000.0, 5000.0),),
-    detect=clock_drift_finding, build=add_clock_drift, correct=with_clock_drift, time_base=True, complete=_complete, auto_params=lambda p: {"ppm": p["ppm"]},
+    detect="sysid.findings.variation:clock_drift_finding", build="sysid.refits:add_clock_drift",
+    correct="sysid.refits:with_clock_drift", time_base=True, complete=_complete,
+    auto_params=lambda p: {"ppm": p["ppm"]},
     kind="correction", figure="segments", random=_random))

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import IdentificationError
-from ..findings.data_quality import dc_offset_finding
-from ..refits import add_dc_offset, with_dc_offset
 from . import Effect, register
 
 __all__ = ["DC_OFFSET"]
@@ -19,6 +17,7 @@ __all__ = ["DC_OFFSET"]
 
 def _complete(params, ctx, before):
     if params["offset_fs"] is None:
+        from ..findings.data_quality import dc_offset_finding  # the detectors load when first asked
         params["offset_fs"] = dc_offset_finding(ctx)["params"]["ear_offset_fs"]
         if not params["offset_fs"]:
             raise IdentificationError("--add dc-offset: the sweeps show no ear-channel offset; give dc-offset:OFFSET_FS")
@@ -34,6 +33,7 @@ DC_OFFSET = register(Effect(
     name="dc-offset", summary="offset of a channel (FS): preamplifier offset, microphone bias",
     simulate_params=(ParameterSpec("level", 0.01, -0.5, 0.5), ParameterSpec("channel", 1, 0, 1, "int")),
     refine_params=(ParameterSpec("offset_fs", None, -1.0, 1.0),),
-    detect=dc_offset_finding, build=add_dc_offset, correct=with_dc_offset, complete=_complete,
+    detect="sysid.findings.data_quality:dc_offset_finding", build="sysid.refits:add_dc_offset",
+    correct="sysid.refits:with_dc_offset", complete=_complete,
     auto_params=lambda p: {"offset_fs": p["ear_offset_fs"]}, kind="correction", accept="full-band",
     figure="levels", random=_random))

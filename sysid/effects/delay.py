@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import IdentificationError
-from ..findings.delay import delay_finding, scan_delay
-from ..refits import add_delay
 from . import Effect, register
 
 __all__ = ["DELAY"]
@@ -19,6 +17,7 @@ __all__ = ["DELAY"]
 
 def _complete(params, ctx, before):
     if params["samples"] is None:
+        from ..findings.delay import scan_delay  # the detectors load when first asked
         best, _ = scan_delay(ctx)
         if best <= ctx.model.delay:
             raise IdentificationError("--add delay: the data show no delay beyond the model's; give delay:SAMPLES")
@@ -35,5 +34,6 @@ DELAY = register(Effect(
     name="delay", summary="pure delay in samples: converter latency, sound path",
     simulate_params=(ParameterSpec("samples", 23, 1, 2000, "int"),),
     refine_params=(ParameterSpec("samples", None, 1, 2000, "int"),),
-    detect=delay_finding, needs=("resonance", "highpass", "lowpass"), build=add_delay, complete=_complete,
+    detect="sysid.findings.delay:delay_finding", needs=("resonance", "highpass", "lowpass"),
+    build="sysid.refits:add_delay", complete=_complete,
     auto_params=lambda p: {"samples": p["samples"]}, figure="delay-scan", random=_random))

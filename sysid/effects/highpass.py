@@ -9,8 +9,6 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.structures import factor_coefficients
-from ..findings.dynamics import dynamics_findings
-from ..refits import add_highpass
 from . import Effect, register
 from .series import complete_factor
 
@@ -26,6 +24,7 @@ HIGHPASS = register(Effect(
     name="highpass", summary="first/second-order high-pass, corner in Hz",
     simulate_params=(ParameterSpec("corner_hz", 60.0, 1.0, 5000.0), ParameterSpec("order", 1, 1, 2, "int")),
     refine_params=(ParameterSpec("corner_hz", None, 1.0, 5000.0), ParameterSpec("order", 1, 1, 2, "int")),
-    detect=dynamics_findings, build=add_highpass, complete=complete_factor("highpass", "corner_hz"),
+    detect="sysid.findings.dynamics:dynamics_findings", build="sysid.refits:add_highpass",
+    complete=complete_factor("highpass", "corner_hz"),
     auto_params=lambda p: {"corner_hz": p["corner_hz"], "order": p["order"]},
     factor=lambda params, fs: factor_coefficients("highpass", params, fs), figure="series-factor", random=_random))

@@ -12,8 +12,6 @@ validates below that bound, which ``refine --auto`` names when it stops there.
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from ..findings.input_noise import input_noise_density, input_noise_finding
-from ..refits import add_input_noise
 from . import Effect, register
 
 __all__ = ["INPUT_NOISE"]
@@ -21,6 +19,7 @@ __all__ = ["INPUT_NOISE"]
 
 def _complete(params, ctx, before):
     if params["input_noise_density"] is None:
+        from ..findings.input_noise import input_noise_density  # the detectors load when first asked
         params["input_noise_density"] = input_noise_density(ctx.sweeps)
     return params
 
@@ -35,6 +34,6 @@ INPUT_NOISE = register(Effect(
     # Input-channel SNR (dB) inside the noise excitation's band; the noise itself is white.
     simulate_params=(ParameterSpec("snr_db", 10.0, -20.0, 80.0),),
     refine_params=(ParameterSpec("input_noise_density", None, 0.0, 1.0),),
-    detect=input_noise_finding, build=add_input_noise, complete=_complete,
+    detect="sysid.findings.input_noise:input_noise_finding", build="sysid.refits:add_input_noise", complete=_complete,
     auto_params=lambda p: {"input_noise_density": p["input_noise_density"]}, accept="not-worse",
     figure="h1-h2", random=_random))

@@ -11,8 +11,6 @@ misfit it must not mistake for harmonics); refined by a Hammerstein input polyno
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from ..findings.nonlinearity import nonlinearity_finding
-from ..refits import add_input_nonlinearity
 from . import Effect, register
 
 __all__ = ["INPUT_NONLINEARITY"]
@@ -27,5 +25,6 @@ INPUT_NONLINEARITY = register(Effect(
     name="input-nonlinearity", summary="static input polynomial (Hammerstein): harmonics at 2f, 3f",
     simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0)),
     refine_params=(ParameterSpec("degree", 3, 2, 3, "int"),),
-    detect=nonlinearity_finding, needs=("resonance", "highpass", "lowpass", "delay"), build=add_input_nonlinearity,
+    detect="sysid.findings.nonlinearity:nonlinearity_finding", needs=("resonance", "highpass", "lowpass", "delay"),
+    build="sysid.refits:add_input_nonlinearity",
     auto_params=lambda p: {"degree": 3}, figure="harmonics", random=_random))

@@ -11,8 +11,6 @@ import numpy as np
 
 from ..core.effect_spec import ParameterSpec
 from ..core.structures import factor_coefficients
-from ..findings.dynamics import dynamics_findings
-from ..refits import add_lowpass
 from . import Effect, register
 from .series import complete_factor
 
@@ -28,6 +26,7 @@ LOWPASS = register(Effect(
     name="lowpass", summary="first/second-order Butterworth low-pass, corner in Hz",
     simulate_params=(ParameterSpec("corner_hz", 2500.0, 50.0, 22000.0), ParameterSpec("order", 2, 1, 2, "int")),
     refine_params=(ParameterSpec("corner_hz", None, 50.0, 22000.0), ParameterSpec("order", 2, 1, 2, "int")),
-    detect=dynamics_findings, build=add_lowpass, complete=complete_factor("lowpass", "corner_hz"),
+    detect="sysid.findings.dynamics:dynamics_findings", build="sysid.refits:add_lowpass",
+    complete=complete_factor("lowpass", "corner_hz"),
     auto_params=lambda p: {"corner_hz": p["corner_hz"], "order": p["order"]},
     factor=lambda params, fs: factor_coefficients("lowpass", params, fs), figure="series-factor", random=_random))

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import IdentificationError
-from ..findings.disturbance import disturbance_finding
-from ..refits import add_periodic_disturbance
 from . import Effect, register
 
 __all__ = ["PERIODIC_DISTURBANCE"]
@@ -23,6 +21,7 @@ __all__ = ["PERIODIC_DISTURBANCE"]
 
 def _complete(params, ctx, before):
     if params["frequencies_hz"] is None:
+        from ..findings.disturbance import disturbance_finding  # the detectors load when first asked
         found = disturbance_finding(ctx)["params"]["frequencies_hz"]
         if not found:
             raise IdentificationError("--add periodic-disturbance: no line found in the residual; "
@@ -42,6 +41,7 @@ PERIODIC_DISTURBANCE = register(Effect(
     simulate_params=(ParameterSpec("frequency_hz", 50.0, 1.0, 22000.0), ParameterSpec("harmonics", 3, 1, 40, "int"),
                      ParameterSpec("level", 1e-3, 0.0, 0.5)),
     refine_params=(ParameterSpec("frequencies_hz", None, 1.0, 22000.0, "list"),),
-    detect=disturbance_finding, needs=("resonance", "highpass", "lowpass"), build=add_periodic_disturbance,
+    detect="sysid.findings.disturbance:disturbance_finding", needs=("resonance", "highpass", "lowpass"),
+    build="sysid.refits:add_periodic_disturbance",
     complete=_complete, auto_params=lambda p: {"frequencies_hz": tuple(p["frequencies_hz"])},
     kind="disturbance", figure="lines", random=_random))

@@ -13,8 +13,6 @@ import numpy as np
 
 from ..core.effect_spec import ParameterSpec
 from ..core.structures import factor_coefficients
-from ..findings.dynamics import dynamics_findings
-from ..refits import add_resonance
 from . import Effect, register
 from .series import complete_factor
 
@@ -32,6 +30,7 @@ RESONANCE = register(Effect(
                      ParameterSpec("gain_db", 10.0, -30.0, 30.0)),
     refine_params=(ParameterSpec("f0_hz", None, 20.0, 22000.0), ParameterSpec("q", 10.0, 0.5, 200.0),
                    ParameterSpec("gain_db", None, -30.0, 30.0)),
-    detect=dynamics_findings, build=add_resonance, complete=complete_factor("resonance", "f0_hz"),
+    detect="sysid.findings.dynamics:dynamics_findings", build="sysid.refits:add_resonance",
+    complete=complete_factor("resonance", "f0_hz"),
     auto_params=lambda p: {"f0_hz": p["f0_hz"], "q": p["q"], "gain_db": p["gain_db"]},
     factor=lambda params, fs: factor_coefficients("resonance", params, fs), figure="series-factor", random=_random))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from ..core.errors import IdentificationError
-from ..findings.dynamics import GAIN, fit_factor
 
 __all__ = ["complete_factor"]
 
@@ -13,6 +12,7 @@ def complete_factor(family: str, frequency: str):
     that best explains the sweeps (``sysid.findings.dynamics.fit_factor``)."""
     def complete(params, ctx, before):
         if params[frequency] is None:
+            from ..findings.dynamics import GAIN, fit_factor  # the detectors load when first asked
             fitted = fit_factor(ctx, family)
             if not fitted.interior or fitted.rms * GAIN > before.rms:
                 raise IdentificationError(f"--add {family}: the sweeps show no {family} the model lacks; "

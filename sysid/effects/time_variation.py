@@ -10,7 +10,6 @@ that changes: it is reported, and the user identifies per condition.
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from ..findings.variation import time_variation_finding
 from . import Effect, register
 
 __all__ = ["TIME_VARIATION"]
@@ -27,6 +26,6 @@ TIME_VARIATION = register(Effect(
     simulate_params=(ParameterSpec("change_db", 3.0, -20.0, 20.0), ParameterSpec("corner_hz", 200.0, 10.0, 2000.0),
                      ParameterSpec("step", 0, 0, 2, "int")),
     # The between-recordings test stands aside on clipped recordings (the clipping finding says which).
-    detect=time_variation_finding, needs=("clipping",),
+    detect="sysid.findings.variation:time_variation_finding", needs=("clipping",),
     not_refinable="a path that changes while recording has no single model; identify per condition",
     kind="report", figure="segments", random=_random))

@@ -9,8 +9,6 @@ floor that nothing named explains; refined by more order (``sysid.refits.add_ord
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from ..findings.under_modelled import under_modelled_finding
-from ..refits import add_order
 from . import Effect, register
 
 __all__ = ["UNDER_MODELLED"]
@@ -18,4 +16,5 @@ __all__ = ["UNDER_MODELLED"]
 UNDER_MODELLED = register(Effect(
     name="under-modelled", summary="too low an order for the dynamics in band",
     refine_params=(ParameterSpec("extra_order", 2, 1, 8, "int"),),
-    detect=under_modelled_finding, needs_all=True, build=add_order, auto_params=lambda p: {"extra_order": 2}))
+    detect="sysid.findings.under_modelled:under_modelled_finding", needs_all=True, build="sysid.refits:add_order",
+    auto_params=lambda p: {"extra_order": 2}))

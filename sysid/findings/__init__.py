@@ -1,8 +1,8 @@
 """Detectors of the physical effects a model misses, one module per family of effects.
 
 Each detector takes a ``DiagnosisContext`` (the model, the recordings, the
-comparison on the sweeps, the findings of the detectors it needs and the shared
-values it declares it reads) and returns ``Finding`` records; ``Finding.to_dict`` is the entry of design.md's diagnosis JSON
+comparison on the sweeps, the findings of the effects it declares it needs and the
+shared values it declares it reads) and returns ``Finding`` records; ``Finding.to_dict`` is the entry of design.md's diagnosis JSON
 ``{"effect", "significant", "score", "params", "explanation", "remedy", "evidence"}``. ``score`` is the detector's statistic divided by its
 significance threshold, so a finding is significant when its score reaches 1
 (and its other conditions hold); scores of different detectors rank findings.
@@ -12,7 +12,11 @@ recording, the session's line search, the segments' responses) is computed once 
 context by a named provider (``provider``), a function of the context's model,
 recordings and comparison only, never of findings, so no detector's result depends on
 which detector asked first. A detector declares the values it reads (``uses``), and
-``diagnose`` lets it read those only (``DiagnosisContext.value``).
+``diagnose`` lets it read those only (``DiagnosisContext.value``). Findings likewise: a
+detector reads those of the effects its effect declares it needs (``sysid.effects.Effect.needs``;
+every finding for ``needs_all``) through ``DiagnosisContext.finding`` and ``findings_of``,
+which refuse any other, so what it sees does not depend on which detectors happened to run
+before it.
 """
 
 from __future__ import annotations
@@ -65,6 +69,9 @@ class DiagnosisContext:
     # (``diagnose`` sets them around each detector; None: any, for a context used outside diagnose).
     values: dict = field(default_factory=dict)
     readable: tuple[str, ...] | None = None
+    # The effects whose findings the running detector may read (``finding``; ``diagnose`` sets them
+    # around each detector; None: any, for a detector that reads every finding and outside diagnose).
+    readable_findings: tuple[str, ...] | None = None
 
     def value(self, name: str):
         """The shared value ``name``, computed by its provider (``PROVIDERS``) once per context."""
@@ -80,6 +87,21 @@ class DiagnosisContext:
             finally:
                 self.readable = readable
         return self.values[name]
+
+    def findings_of(self, *effects: str) -> list:
+        """The findings so far of the named effects, in the order they were found; each effect must be
+        one the running detector declares it needs (``readable_findings``)."""
+        if self.readable_findings is not None:
+            undeclared = [name for name in effects if name not in self.readable_findings]
+            if undeclared:
+                declared = ", ".join(self.readable_findings) or "none"
+                raise KeyError(f"the finding of {undeclared[0]!r} is read by a detector that does not declare it "
+                               f"(sysid.effects.Effect.needs); it declares {declared}")
+        return [f for f in self.findings if f["effect"] in effects]
+
+    def finding(self, effect: str):
+        """The finding of ``effect`` (one the running detector declares it needs), or None when there is none."""
+        return next(iter(self.findings_of(effect)), None)
 
     @property
     def fs(self) -> float:

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.thresholds import SKIP_S
 from ..io.lines import LINE_RATIO, driven, fit_sinusoids
-from ..validation.sweeps import SKIP_S
 from . import DiagnosisContext, finding, noise_prediction, uses
 from .dynamics import factor_residual, has_series_factor, within_resonance
 

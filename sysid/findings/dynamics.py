@@ -38,26 +38,21 @@ import scipy.optimize
 import scipy.signal
 
 from ..core import structures
-from ..core.thresholds import EXCESS, EXPLAINS_GAIN
-from ..validation.sweeps import SKIP_S, VALIDATION_BAND, CompressedValidation, SweepSpectrum, rms_from_responses
+from ..core.thresholds import EXCESS, EXPLAINS_GAIN, HIGHPASS_RANGE, LOWPASS_RANGE, SKIP_S, VALIDATION_BAND
+from ..core.thresholds import FACTOR_EDGE as EDGE
+from ..core.thresholds import FACTOR_SHARE as SHARE
+from ..core.thresholds import FACTOR_SIMPLER as SIMPLER
+from ..core.thresholds import RESONANCE_F0_RANGE as F0_RANGE
+from ..core.thresholds import RESONANCE_GAIN_RANGE_DB as GAIN_RANGE_DB
+from ..core.thresholds import RESONANCE_MIN_GAIN_DB as MIN_GAIN_DB
+from ..core.thresholds import RESONANCE_Q_RANGE as Q_RANGE
+from ..validation.sweeps import CompressedValidation, SweepSpectrum, rms_from_responses
 from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["dynamics_findings", "arbitrate", "with_series_factor", "factor_residual", "within_resonance", "SweepBins",
            "sweep_bins", "FactorFit", "fit_factor", "FAMILIES", "series_factor_finding", "has_series_factor"]
 
 GAIN = EXPLAINS_GAIN
-SHARE = 0.8
-SIMPLER = 1.03
-# Bounds of the fitted parameters. Q beyond 30 would let a line fit a hum bin; below 1 a
-# "resonance" is a broad gain change, not a mode. f0 stays inside the band (fractions of its edges).
-Q_RANGE = (1.0, 30.0)
-F0_RANGE = (25.0, 0.95)
-# "At a bound" means within 1 % of it (the frequency and Q are fitted as logarithms).
-EDGE = 0.01
-MIN_GAIN_DB = 1.0
-GAIN_RANGE_DB = (-30.0, 30.0)
-HIGHPASS_RANGE = (1.0, 1000.0)
-LOWPASS_RANGE = (150.0, 20000.0)
 FAMILIES = ("resonance", "highpass", "lowpass")
 # The fits run on the sweeps compressed to cells this wide (``sysid.validation.CompressedValidation``);
 # the chosen factor's rms is then evaluated exactly.
@@ -255,8 +250,9 @@ def dynamics_findings(ctx: DiagnosisContext) -> list[dict]:
 
 
 def series_factor_finding(ctx: DiagnosisContext):
-    """The significant series-factor finding among the context's findings so far, or None."""
-    return next((f for f in ctx.findings if f["significant"] and f["effect"] in FAMILIES), None)
+    """The significant series-factor finding among the context's findings so far, or None (read by the
+    detectors that declare they need the series factors)."""
+    return next((f for f in ctx.findings_of(*FAMILIES) if f["significant"]), None)
 
 
 def has_series_factor(ctx: DiagnosisContext) -> bool:

@@ -22,22 +22,16 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..core.thresholds import AT_FLOOR
+from ..core.thresholds import AT_FLOOR, VALIDATION_BAND
+from ..core.thresholds import INPUT_NOISE_BIAS_BAND as BIAS_BAND
+from ..core.thresholds import INPUT_NOISE_BIAS_DB as BIAS_DB
+from ..core.thresholds import INPUT_NOISE_BOUND_EXCESS as BOUND_EXCESS
+from ..core.thresholds import INPUT_NOISE_BOUND_SHARE as BOUND_SHARE
 from ..io.recordings import Recording
-from ..validation.sweeps import VALIDATION_BAND, noise_floor
+from ..validation.sweeps import noise_floor
 from . import DiagnosisContext, finding, uses
 
 __all__ = ["input_noise_finding", "input_noise_density", "input_noise_error", "bound_ratio", "bound_share"]
-
-BIAS_DB = 0.1
-BIAS_BAND = (20.0, 1500.0)
-# The bound is stated in the explanation from this many times the floor.
-BOUND_EXCESS = 1.1
-# Input noise bounds the validation error when it carries at least this share of the error power
-# above the floor, (bound^2 - 1) / (excess^2 - 1): every input channel has some noise (61 dB SNR
-# leaves the true path at 1.1x), and a model far above the floor for another effect is not bounded
-# by it; that effect is named first and the bound once the error comes down to it.
-BOUND_SHARE = 0.1
 
 
 def input_noise_density(sweeps: list[Recording], band=VALIDATION_BAND) -> float:

@@ -19,11 +19,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..core.thresholds import EXCESS, IDENTIFICATION_BAND
+from ..core.thresholds import DRIFT_PPM, DRIFT_T, EXCESS, IDENTIFICATION_BAND, SKIP_S, VALIDATION_BAND, VARIATION_RATIO
+from ..core.thresholds import VARIATION_CHANGE_DB as CHANGE_DB
+from ..core.thresholds import VARIATION_CHANGE_T as CHANGE_T
+from ..core.thresholds import VARIATION_LOW_HZ as LOW_HZ
 from ..io.data_quality import clipped_samples
 from ..io.lines import without_lines
 from ..validation.compare import third_octave_bands
-from ..validation.sweeps import SKIP_S, VALIDATION_BAND
 from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding", "recording_change",
@@ -31,15 +33,6 @@ __all__ = ["segment_responses", "clock_drift_finding", "time_variation_finding",
 
 SEGMENTS = 8
 NPERSEG = 4410  # 10 Hz resolution: about 28 bins below 300 Hz for the time-variation ratio
-# Clock drift: at least this many ppm, with the trend this many standard errors from zero.
-DRIFT_PPM, DRIFT_T = 3.0, 10.0
-# Time variation: halves differ this many times more than interleaved segments (median over bins).
-VARIATION_RATIO = 4.0
-# Between recordings: the low band (below LOW_HZ) moves against the band above by CHANGE_DB and
-# CHANGE_T standard errors of the noise recording's levels.
-LOW_HZ = 300.0
-CHANGE_DB = 0.3
-CHANGE_T = 6.0
 
 
 def segment_responses(ctx: DiagnosisContext):
@@ -158,7 +151,7 @@ def recording_change(ctx: DiagnosisContext) -> dict:
     names = list(levels)
     # A clipped recording's levels are the clipper's, not the path's (the clipping finding names it, also
     # where a hum after the clipper hides the flat tops from the histogram).
-    clipped = any(f["effect"] == "clipping" and f["significant"] for f in ctx.findings) or any(
+    clipped = any(f["significant"] for f in ctx.findings_of("clipping")) or any(
         clipped_samples(x).fraction > 0 for r in (ctx.noise, *ctx.sweeps) for x in (r.u, r.y))
     if clipped or np.count_nonzero(low) < 2 or np.count_nonzero(mid) < 2:
         return {"changed": False, "pairs": {}, "odd_one_out": None, "change_db": 0.0}

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.fft
 
 from ..core.errors import IdentificationError
+from ..core.thresholds import SKIP_S, VALIDATION_BAND
 from ..io.lines import find_lines, fit_sinusoids, without_lines
 from ..io.recordings import Recording
 
@@ -32,11 +33,12 @@ __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses
            "noise_floor", "repeat_lines", "without_repeat_lines", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "validation_start",
            "aligned_ears", "SKIP_S", "VALIDATION_BAND"]
 
-SKIP_S = 0.05
+# ``SKIP_S`` and ``VALIDATION_BAND`` are defined in ``sysid.core.thresholds`` with the other bands, and
+# importable from here as before.
+
 # Above this largest prime factor of a length numpy's DFT is slow (long generic passes or Bluestein's
 # algorithm), and one complex DFT costs about what one real one does (``rfft_pair``).
 _SLOW_PRIME = 600
-VALIDATION_BAND = (20.0, 4000.0)
 
 
 @dataclass

@@ -4,10 +4,13 @@ The checks read the plotted data back (lines, meshes, limits) rather than compar
 images; figures are never rendered here except where layout matters.
 """
 
+import ast
+
 import numpy as np
 import pytest
 from matplotlib.collections import QuadMesh
 from matplotlib.figure import Figure
+from repo import REPO
 
 from report import figures
 from report.diagnosis_figures import FINDING_PLOTS
@@ -17,8 +20,19 @@ from sysid.core.lti import hankel_singular_values
 from sysid.core.model import Model
 from sysid.core.sections import second_order_sections, sections_response
 from sysid.estimation.spectra import response
-from sysid.findings import DiagnosisContext
+from sysid.findings import PROVIDERS, DiagnosisContext
 from sysid.validation.compare import compare
+
+
+@pytest.fixture(scope="module", autouse=True)
+def delay_scan_value():
+    """The delay scan's shared value ``"delay-scan"`` (best total delay, cost per total delay with NaN where
+    not evaluated), provided here as the delay detector's coarse scan where no provider is registered."""
+    with pytest.MonkeyPatch.context() as patch:
+        if "delay-scan" not in PROVIDERS:
+            from sysid.findings.delay import scan_delay
+            patch.setitem(PROVIDERS, "delay-scan", lambda ctx: scan_delay(ctx, coarse=True))
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -220,6 +234,38 @@ class TestDiagnosisFigures:
         figure = figures.finding_figure(_finding("resonance", f0_hz=1000.0, q=5.0, gain_db=10.0), context, result.spectra)
         fitted = next(line for line in figure.axes[0].get_lines() if "factor" in str(line.get_label()))
         assert np.max(fitted.get_ydata()) == pytest.approx(10.0, abs=0.1)
+
+    def test_the_delay_scan_is_drawn_from_the_context(self, ff):
+        session, result, comparison = ff
+        context = DiagnosisContext(result.model, session.noise, session.sweeps, comparison)
+        costs = np.full(result.model.delay + 40, np.nan)
+        costs[::2] = np.linspace(4.0, 2.0, costs[::2].size)
+        costs[30] = 1.0
+        context.values["delay-scan"] = (30, costs)
+        figure = figures.finding_figure(_finding("delay", samples=30 - result.model.delay), context, result.spectra)
+        scan = figure.axes[0].get_lines()[0]
+        # The evaluated delays only, each cost over the least.
+        np.testing.assert_array_equal(scan.get_xdata(), np.flatnonzero(np.isfinite(costs)))
+        np.testing.assert_allclose(scan.get_ydata(), costs[np.isfinite(costs)])
+        star = next(line for line in figure.axes[0].get_lines() if line.get_marker() == "*")
+        assert list(star.get_xdata()) == [30]
+
+    def test_the_segments_are_drawn_from_the_context(self, ff):
+        session, result, comparison = ff
+        context = DiagnosisContext(result.model, session.noise, session.sweeps, comparison)
+        f = np.linspace(0.0, 22050.0, 2206)
+        responses = np.array([np.full(f.size, 2.0 + k) for k in range(4)])
+        context.values["segments"] = (f, responses, np.ones((4, f.size)), np.arange(4) * 44100.0 + 22050.0)
+        finding = dict(_finding("clock-drift", ppm=0.0), evidence={"segment_delays": [0.0, 0.1, 0.2, 0.3]})
+        figure = figures.finding_figure(finding, context, result.spectra)
+        levels = [line.get_ydata()[0] for line in figure.axes[0].get_lines()]
+        assert levels == pytest.approx(list(20 * np.log10(2.0 + np.arange(4))))
+
+    def test_no_figure_module_runs_a_detector(self):
+        for path in (REPO / "report").glob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.ImportFrom) and node.module:
+                    assert node.module not in ("sysid.findings.delay", "sysid.findings.variation"), path.name
 
     def test_dedicated_plots_cover_the_detectors(self):
         from sysid.diagnose import DETECTORS

@@ -68,3 +68,36 @@ def test_a_detector_reads_only_the_values_it_declares():
     np.testing.assert_array_equal(ctx.value("noise-prediction"), model.simulate(session.noise.u))
     with pytest.raises(KeyError, match="no provider"):
         ctx.value("nothing")
+
+
+def test_a_detector_reads_only_the_findings_it_needs():
+    session = true_session("ff", 5, ())
+    model = _true_model(session)
+    seen = {}
+
+    def reader(name):
+        def detect(ctx):
+            seen[name] = [f.effect for f in ctx.findings_of("clipping", "delay")]
+            return finding(name, False, 0.0, {"clipping": ctx.finding("clipping") is not None}, "", "none")
+        return uses()(detect)
+
+    declared = Effect(name="x-reads", summary="x", kind="report", detect=reader("x-reads"), needs=("clipping", "delay"))
+    with effects.registered(declared):
+        found = next(f for f in diagnose(model, session.noise, session.sweeps) if f.effect == "x-reads")
+    assert found.params == {"clipping": True} and seen["x-reads"] == ["clipping", "delay"]
+    # Declaring one of them is not enough to read the other, whichever ran first.
+    partly = Effect(name="x-reads", summary="x", kind="report", detect=reader("x-reads"), needs=("clipping",))
+    with effects.registered(partly), pytest.raises(KeyError, match="finding of 'delay'.*declares clipping"):
+        diagnose(model, session.noise, session.sweeps)
+    # Outside diagnose every finding is readable (none yet on a new context).
+    ctx = DiagnosisContext(model, session.noise, session.sweeps, compare(model, session.sweeps))
+    assert ctx.finding("delay") is None and ctx.findings_of("delay") == []
+
+
+def test_every_detector_reads_what_its_effect_needs():
+    # needs_all: every finding; a shared detector: what each of its effects needs.
+    assert effects.findings_read_by(effects.get("under-modelled").detect) is None
+    assert effects.findings_read_by(effects.get("resonance").detect) == ()
+    assert effects.findings_read_by(effects.get("time-variation").detect) == ("clipping",)
+    assert effects.findings_read_by(effects.get("input-nonlinearity").detect) == ("resonance", "highpass", "lowpass",
+                                                                                    "delay")
