@@ -23,7 +23,7 @@ from sysid.simulate import simulate_session
 NOMINAL_ORDER = {"fb": 7, "ff": 5}
 # Refits in tests: a few gammas instead of the step-30 grid keep each refit to seconds.
 TEST_REFIT = IdentificationOptions(gammas=(50, 100, 200, 400), refine_seconds=3.0)
-# Identification of the every-effect workflow's sessions (tests/sysid/effects/test_effects_workflow.py).
+# Identification of the every-effect workflow's sessions (tests/test_sysid/effects/test_effects_workflow.py).
 WORKFLOW_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 60)), refine_seconds=3.0)
 
 

@@ -10,7 +10,7 @@ corrected by leaving the clipped stretches out of identification and validation
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["CLIPPING"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.errors import IdentificationError
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["CLOCK_DRIFT"]
 

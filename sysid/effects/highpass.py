@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
 from ..core.structures import factor_coefficients
-from . import Effect, register
+from .registry import Effect, register
 from .series import complete_factor
 
 __all__ = ["HIGHPASS"]

@@ -12,7 +12,7 @@ validates below that bound, which ``refine --auto`` names when it stops there.
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["INPUT_NOISE"]
 

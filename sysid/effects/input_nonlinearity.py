@@ -11,7 +11,7 @@ misfit it must not mistake for harmonics); refined by a Hammerstein input polyno
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["INPUT_NONLINEARITY"]
 

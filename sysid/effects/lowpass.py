@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.effect_spec import ParameterSpec
 from ..core.structures import factor_coefficients
-from . import Effect, register
+from .registry import Effect, register
 from .series import complete_factor
 
 __all__ = ["LOWPASS"]

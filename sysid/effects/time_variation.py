@@ -10,7 +10,7 @@ that changes: it is reported, and the user identifies per condition.
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["TIME_VARIATION"]
 

@@ -9,7 +9,7 @@ floor that nothing named explains; refined by more order (``sysid.refits.add_ord
 from __future__ import annotations
 
 from ..core.effect_spec import ParameterSpec
-from . import Effect, register
+from .registry import Effect, register
 
 __all__ = ["UNDER_MODELLED"]
 

@@ -15,7 +15,7 @@ of the unwrapped phase of H against angular frequency in rad/sample, so tau is i
 
 Measured on sessions of the appendix-A plants (seeds 0-1) and of random helmet paths
 (``sysid.random_plant``, seeds 0-40, both paths; noise, 1-2 s sweeps; see
-tests/sysid/io/test_channels.py and BENCHMARKS.md): in the right order tau is 1.7 to 74 samples,
+tests/test_sysid/io/test_channels.py and BENCHMARKS.md): in the right order tau is 1.7 to 74 samples,
 swapped it is -1.7 to -74. The channels are called swapped when tau is at most
 ``-LEAD_SAMPLES``; the order is unclear (a warning) when |tau| is below it: a path with
 no latency and no lag, a pure gain, looks the same both ways round.

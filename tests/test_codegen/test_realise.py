@@ -1,4 +1,4 @@
-"""Tests of codegen.realise: truncation, re-discretisation, refusals (the balancing: tests/sysid/core/test_lti.py)."""
+"""Tests of codegen.realise: truncation, re-discretisation, refusals (the balancing: tests/test_sysid/core/test_lti.py)."""
 
 import numpy as np
 import pytest
