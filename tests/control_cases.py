@@ -1,0 +1,126 @@
+"""Control test cases: plant pairs, road noise recorded with ANC off, and the judge that closes the loop.
+
+The judge is independent of the design: it runs a controller sample by sample on the TRUE plants
+(``anc.closed_loop.run_closed_loop``) against a fresh realisation of the noise, and measures the
+attenuation per third-octave band from the ear signals (``anc.closed_loop.measured_attenuation``).
+The noise the designs are given is a recording with ANC off, as a user makes one: the chin
+microphone x (pink noise 20 Hz-2 kHz) and the ear d = P_true x + u, u not coherent with the chin,
+``INCOHERENT_DB`` below the chin-coherent ear noise in every band (a 40 dB coherence bound).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from anc.closed_loop import measured_attenuation, run_closed_loop
+from anc.prediction import band_centres
+from sysid.core.model import Model
+from sysid.core.plants import appendix_a_model
+from sysid.identify import identify
+from sysid.io.recordings import Recording
+from sysid.random_plant import random_plant, random_session
+from sysid.simulate import SessionSpec, simulate_session
+
+from conftest import FAST_OPTIONS, SHORT
+
+INCOHERENT_DB = -40.0
+PINK_BAND_HZ = (20.0, 2000.0)
+# The bands every judgement averages over: third-octave centres 50 Hz-1 kHz.
+JUDGED_HZ = (50.0, 1000.0)
+CENTRES = np.array(band_centres())
+JUDGED = (CENTRES >= JUDGED_HZ[0]) & (CENTRES <= JUDGED_HZ[1])
+# Random FB seeds of the project's generator; each is paired with the first FF seed from seed + 1000 at its rate.
+RANDOM_FB_SEEDS = (3, 5, 11, 12, 1, 2, 4, 6, 7, 8)
+
+
+@dataclass(frozen=True)
+class PlantPair:
+    """A helmet's two true paths: ``s`` the FB path (drive -> ear), ``p`` the FF path (chin -> ear)."""
+
+    name: str
+    s: Model
+    p: Model
+    fb_seed: int | None = None
+    ff_seed: int | None = None
+
+
+def seed_pair() -> PlantPair:
+    """The seed thesis's appendix-A plants."""
+    return PlantPair("seed appendix A", appendix_a_model("fb"), appendix_a_model("ff"))
+
+
+def random_pair(fb_seed: int) -> PlantPair:
+    """Random FB path ``fb_seed`` with the first random FF path from ``fb_seed + 1000`` at the same sample rate."""
+    s = random_plant(fb_seed, "fb")
+    ff_seed = fb_seed + 1000
+    while random_plant(ff_seed, "ff").fs != s.fs:
+        ff_seed += 1
+    return PlantPair(f"random {fb_seed}/{ff_seed}", s.model, random_plant(ff_seed, "ff").model, fb_seed, ff_seed)
+
+
+@lru_cache(maxsize=None)
+def identified(pair_name: str) -> tuple[Model, Model]:
+    """(S, P) identified on short synthetic sessions of the pair ``pair_name`` ("seed" or "random N")."""
+    if pair_name == "seed":
+        s_session = simulate_session(SessionSpec(path="fb", seed=11, **SHORT))
+        p_session = simulate_session(SessionSpec(path="ff", seed=11, **SHORT))
+    else:
+        pair = random_pair(int(pair_name.split()[1]))
+        s_session = random_session(pair.fb_seed, "fb", **SHORT)
+        p_session = random_session(pair.ff_seed, "ff", **SHORT)
+    return (identify(s_session.noise, s_session.sweeps, "fb", FAST_OPTIONS).model,
+            identify(p_session.noise, p_session.sweeps, "ff", FAST_OPTIONS).model)
+
+
+def pink_noise(n: int, fs: float, rng: np.random.Generator, band=PINK_BAND_HZ) -> np.ndarray:
+    """Unit-variance noise with a 1/f power spectrum inside ``band`` (Hz) and none outside (circular shaping)."""
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    gain = np.where((f >= band[0]) & (f <= band[1]), 1.0 / np.sqrt(np.maximum(f, band[0])), 0.0)
+    x = np.fft.irfft(spectrum * gain, n)
+    return x / np.std(x)
+
+
+def road_noise(p_true: Model, seconds: float, seed: int, level: float = 0.05,
+               incoherent_db: float = INCOHERENT_DB) -> tuple[np.ndarray, np.ndarray]:
+    """(x, d): the chin microphone (pink, ``level`` FS rms) and the ear with ANC off, d = P_true x + u, with u
+    ``incoherent_db`` below P_true x in every band (u = P_true x' for an independent pink x', scaled)."""
+    fs = p_true.fs
+    n = int(round(seconds * fs))
+    rng = np.random.default_rng(seed)
+    x = level * pink_noise(n, fs, rng)
+    other = level * pink_noise(n, fs, rng)
+    u = 10.0 ** (incoherent_db / 20.0) * p_true.simulate(other)
+    return x, p_true.simulate(x) + u
+
+
+def recording_with_anc_off(p_true: Model, seconds: float = 6.0, seed: int = 1) -> Recording:
+    """The road noise as a user records it with ANC off: input channel = chin, output = ear."""
+    x, d = road_noise(p_true, seconds, seed)
+    return Recording(x, d, p_true.fs, f"road-noise-{seed}.wav", (0.0, 0.0), (0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """Attenuation per third-octave band (dB, ``anc.prediction.band_centres``) of each configuration the
+    controller has ("ff", "fb", "both"), measured on the true plants, and their means over ``JUDGED_HZ``."""
+
+    per_band: dict[str, np.ndarray]
+
+    def mean(self, part: str) -> float:
+        return float(np.mean(self.per_band[part][JUDGED]))
+
+
+def judge(controller, pair: PlantPair, seconds: float = 4.0, seed: int = 7) -> Judgement:
+    """The controller on the TRUE plants of ``pair`` against a fresh realisation of the road noise."""
+    x, d = road_noise(pair.p, seconds, seed)
+    parts = {}
+    for part, use_ff, use_fb in (("ff", True, False), ("fb", False, True), ("both", True, True)):
+        if (use_ff and controller.ff is None) or (use_fb and controller.fb is None):
+            continue
+        run = run_closed_loop(controller, pair.s, d, x, use_ff, use_fb)
+        parts[part] = np.array(measured_attenuation(d, run.e, pair.s.fs))
+    return Judgement(parts)
