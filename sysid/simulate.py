@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from . import effects as registry
 from .core.effect_spec import EffectSpec, ParameterSpec, parse_effect
 from .core.errors import HelmetAncError
 from .core.files import atomic_write, atomic_write_text
+from .core.measured import FirPlant, measured_response
 from .core.model import Model
 from .core.plants import appendix_a_model
 from .core.structures import series, tf_to_statespace
@@ -30,7 +31,7 @@ from .core.thresholds import TRANSIENT_S
 from .io.data_quality import clipped_samples
 from .io.recordings import Recording, write_wav16
 
-__all__ = ["SessionSpec", "Session", "simulate_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
+__all__ = ["SessionSpec", "Session", "simulate_session", "measured_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
            "SIMULATED_EFFECTS", "random_effect"]
 
 TRUTH_FORMAT = "helmet-anc/truth@1"
@@ -80,7 +81,7 @@ class Session:
     """A simulated session: the three recordings (quantised) and the truth behind them."""
 
     spec: SessionSpec
-    plant: Model
+    plant: Model | FirPlant
     noise: Recording
     sweeps: list[Recording]
     truth: dict = field(default_factory=dict)
@@ -103,8 +104,11 @@ def _quantise16(x: np.ndarray) -> np.ndarray:
     return np.clip(np.round(x * 32768.0), -32768, 32767) / 32768.0
 
 
-def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None, effects=()) -> Session:
+def simulate_session(spec: SessionSpec | None = None, plant: Model | FirPlant | None = None, effects=()) -> Session:
     """Simulate a session of the given spec; the plant defaults to the appendix-A model of spec.path.
+
+    A ``FirPlant`` (a measured impulse response, ``sysid.core.measured``) is simulated by convolution, the
+    hidden series factors and delay applied to its taps.
 
     ``effects`` are ``EffectSpec`` objects or strings such as ``"delay:23"`` (see
     ``SIMULATED_EFFECTS`` for each kind's parameters); ``truth["effects"]`` records them
@@ -130,7 +134,10 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
     sweep_in = sweep_signal(spec)
 
     # Scale each excitation so the clean ear signal of the linear plant peaks at peak_level.
-    linear = Model(path=plant.path, fs=plant.fs, A=plant.A, B=plant.B, C=plant.C, D=plant.D, delay=plant.delay)
+    if isinstance(plant, FirPlant):
+        linear = plant.linear()
+    else:
+        linear = Model(path=plant.path, fs=plant.fs, A=plant.A, B=plant.B, C=plant.C, D=plant.D, delay=plant.delay)
     noise_gain = spec.peak_level / np.max(np.abs(linear.simulate(noise_in)))
     sweep_gain = spec.peak_level / np.max(np.abs(linear.simulate(sweep_in)))
     noise_gain = min(noise_gain, spec.peak_level / np.max(np.abs(noise_in)))
@@ -139,7 +146,10 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
     records = _effect_records(hidden, spec, noise_gain, max(sweep_gain, noise_gain * float(np.max(np.abs(noise_in)))),
                               float(ear_peak))
     if "input-nonlinearity" in hidden:
-        plant.input_nonlinearity = records["input-nonlinearity"]["coefficients"]
+        if isinstance(plant, FirPlant):
+            plant = replace(plant, input_nonlinearity=records["input-nonlinearity"]["coefficients"])
+        else:
+            plant.input_nonlinearity = records["input-nonlinearity"]["coefficients"]
 
     lengths = [noise_in.size, sweep_in.size, sweep_in.size]
     timeline = np.cumsum([0] + lengths)
@@ -179,8 +189,19 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | None = None
     if "clipping" in hidden:
         # What the ear channel records is the plant times the too-high preamp gain.
         gain = records["clipping"]["ear_gain"]
-        truth["plant"].update(C=(plant.C * gain).tolist(), D=(plant.D * gain).tolist())
+        if isinstance(plant, FirPlant):
+            truth["plant"].update(taps=(plant.taps * gain).tolist())
+        else:
+            truth["plant"].update(C=(plant.C * gain).tolist(), D=(plant.D * gain).tolist())
     return Session(spec, plant, noise, sweeps, truth)
+
+
+def measured_session(name: str, path: str = "fb", seed: int = 0, effects=(), **spec_overrides) -> Session:
+    """A session through one of the measured responses (``sysid.core.measured.MEASURED_RESPONSES``) at its own
+    sample rate; ``spec_overrides`` change the other ``SessionSpec`` fields (durations, noise levels)."""
+    plant = measured_response(name, path)
+    spec = SessionSpec(path=path, seed=seed, **{"fs": plant.fs, **spec_overrides})
+    return simulate_session(spec, plant, effects)
 
 
 def _recording(u: np.ndarray, y: np.ndarray, fs: float, name: str) -> Recording:
@@ -202,9 +223,15 @@ def _parse_effects(effects, fs: float) -> dict[str, dict]:
     return hidden
 
 
-def _effective_plant(base: Model, hidden: dict[str, dict]) -> Model:
+def _effective_plant(base: Model | FirPlant, hidden: dict[str, dict]) -> Model | FirPlant:
     """The base plant with the hidden linear effects in series: the delay, and every effect that is
     a factor (``Effect.factor``: resonance, high-/low-pass, a user's own)."""
+    if isinstance(base, FirPlant):
+        for kind, params in hidden.items():
+            factor = registry.get(kind).factor
+            if factor is not None:
+                base = base.with_factor(*factor(params, base.fs))
+        return base.delayed(hidden["delay"]["samples"]) if "delay" in hidden else base
     system = (base.A, base.B, base.C, base.D)
     for kind, params in hidden.items():
         factor = registry.get(kind).factor
