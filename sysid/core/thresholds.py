@@ -184,8 +184,15 @@ MAX_EXTRA_DELAY = 120
 VALIDATION_BAND = (20.0, 4000.0)
 # Each sweep's first seconds are left out of the validation rms and the noise floor.
 SKIP_S = 0.05
+# Two sweeps repeat one excitation (sysid.validation.sweeps.check_repeats) when their inputs, aligned,
+# correlate at least this much (they share more than the input channel's noise holds apart) and when
+# a level difference between them does not make up most of their ear difference: the band rms of
+# the difference falls by no more than this factor once the second ear is scaled to the first's level
+# (sqrt 2: the level difference's share at most equal to the noise's).
+REPEAT_CORRELATION = 0.5
+REPEAT_FLOOR_INFLATION = 2.0**0.5
 
-__all__ += ["VALIDATION_BAND", "SKIP_S"]
+__all__ += ["VALIDATION_BAND", "SKIP_S", "REPEAT_CORRELATION", "REPEAT_FLOOR_INFLATION"]
 
 
 
