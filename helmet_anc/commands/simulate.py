@@ -7,6 +7,8 @@ from pathlib import Path
 from sysid.core.effect_spec import parse_effect
 from sysid.core.errors import HelmetAncError
 from sysid.core.files import OutputRefused, check_output_file, is_ours
+from sysid.core.thresholds import NOISE_AFTER_TRANSIENT_S
+from sysid.io.recordings import noise_length_rule
 from sysid.random_plant import random_session
 from sysid.simulate import SIMULATED_EFFECTS, SessionSpec, simulate_session, write_session
 
@@ -60,8 +62,9 @@ def run(args) -> int:
     settings = dict(noise_duration=args.noise_seconds, sweep_duration=args.sweep_seconds,
                     input_noise=args.input_noise, **output_noise)
     spec = SessionSpec(path=args.path, seed=args.seed, **settings)
-    if args.noise_seconds <= spec.transient_s + 0.2:
-        raise HelmetAncError(f"--noise-seconds must exceed the {spec.transient_s:g} s transient; found {args.noise_seconds:g}")
+    if not args.noise_seconds > spec.transient_s + NOISE_AFTER_TRANSIENT_S:
+        raise HelmetAncError(f"--noise-seconds {args.noise_seconds:g}: a noise recording needs "
+                             f"{noise_length_rule(spec.transient_s)}")
     if args.sweep_seconds <= 0.1:
         raise HelmetAncError(f"--sweep-seconds must be above 0.1; found {args.sweep_seconds:g}")
     if args.seed < 0:

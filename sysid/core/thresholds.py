@@ -9,7 +9,7 @@ otherwise. Detectors and ``refine`` import them from here, so the meaning of
 from __future__ import annotations
 
 __all__ = ["AT_FLOOR", "EXCESS", "UNDER_MODELLED_EXCESS", "EXPLAINS_GAIN", "FACTOR_EXPLAINS", "WORSE",
-           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG",
+           "IDENTIFICATION_BAND", "TRANSIENT_S", "NOISE_AFTER_TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG",
            "LINE_RATIO"]
 
 # Validation rms at most this many times the noise floor counts as at the floor.
@@ -33,6 +33,11 @@ WORSE = 1.02
 IDENTIFICATION_BAND = (20.0, 5000.0)
 # The first seconds of a noise recording are transient (design.md, "Who uses it").
 TRANSIENT_S = 3.0
+# A noise recording must hold more than this after its transient (s): identify, diagnose and report
+# alike (sysid.io.recordings.check_noise_length). The most any of them needs: the time-variation and
+# clock-drift detectors compare 8 segments of 4410 samples (10 Hz resolution), 0.8 s at 44.1 kHz;
+# identify needs one averaging segment of the 20 Hz grid (0.05 s).
+NOISE_AFTER_TRANSIENT_S = 0.8
 
 # ``refine --auto``: at most this many steps; a step is kept only if it lowers the validation rms
 # by more than the run-to-run noise of that figure, and never by less than this fraction.
