@@ -207,7 +207,9 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
                                                            rejected="validated worse than the seed grid's choice")
             result_model = seed_model
     final_rms = seed_rms if result_model is seed_model else refined_rms
-    start_gamma = result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma)
+    # A model kept from the seed grid records its own gamma, not the one the rejected refinement started from.
+    start_gamma = (chosen.gamma if result_model is seed_model
+                   else result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma))
     result_model.identification.update({
         "gamma": start_gamma,
         "order": result_model.order,

@@ -92,7 +92,12 @@ def identification_summary(result: Identification) -> str:
                      f"{info['refinement'].get('start', 'gamma ' + str(info['refinement']['start_gamma']))}, rms {result.refined_rms:.3e} FS "
                      f"({result.refined_rms / result.noise_floor:.2f}x noise floor)")
     kind = "refined" if info["refined"] else "seed grid"
-    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
+    refinement = info.get("refinement", {})
+    order = f"order {model.order}"
+    if info["refined"] and refinement.get("order") not in (None, model.order):
+        # The order search's pick, then states the data did not ask for left out (sysid.estimation.reduction).
+        order += f" (reduced from {refinement['order']}: {refinement.get('reduced') or 'states left out'})"
+    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, {order}, rms {info['rms']:.3e} FS, "
                  f"noise floor {result.noise_floor:.3e} FS, {'stable' if model.stable else 'UNSTABLE'} "
                  f"(largest pole radius {model.spectral_radius:.6f})")
     return "\n".join(lines)
