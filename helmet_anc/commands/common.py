@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from report.target import report_file
 from sysid.core.errors import HelmetAncError
 from sysid.core.files import check_output_file
 from sysid.core.model import Model
@@ -69,12 +70,16 @@ def check_output(path: str, args=None, option: str = "-o") -> Path:
                              force=bool(getattr(args, "force", False)), option=option)
 
 
-def check_report_target(path: str | None, args=None) -> Path | None:
-    """The --report target: an existing folder, or a file whose folder exists (checked before any work)."""
+def check_report_target(path: str | None, args=None, kind: str = "fb", option: str = "--report") -> Path | None:
+    """The --report file, checked before any work (as ``-o``): the file given, or ``<folder>/<kind>-report.html``
+    for an existing folder (``report.target``: a path ending with a separator is a folder, which must exist)."""
     if path is None:
         return None
-    target = Path(path)
-    return target if target.is_dir() else check_output(path, args, "--report")
+    try:
+        target = report_file(path, kind)
+    except HelmetAncError as exc:
+        raise HelmetAncError(f"{option} {exc}") from None
+    return check_output(target, args, option)
 
 
 def identification_summary(result: Identification) -> str:
