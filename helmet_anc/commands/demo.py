@@ -33,7 +33,6 @@ DEMO_EFFECTS = ("delay:23", "periodic-disturbance")
 # The demo's sessions and grid: short sessions and the seed's gamma grid at step 30 (tests/conftest.py).
 DEMO_SESSION = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
 DEMO_OPTIONS = IdentificationOptions(gammas=tuple(range(10, 1001, 30)))
-STEPS = 6
 
 ORDER = 90
 # The demo's own manifest: every file of OUTDIR it wrote (relative path -> SHA-256). A rerun
@@ -98,25 +97,32 @@ def run(args) -> int:
     return 0
 
 
-class _Steps:
-    """One line per step on stderr, ``demo [2/6] identify: the FF path ...`` (none with --quiet), with the
-    seconds the step before it took."""
+def step_count(report: bool, firmware: bool) -> int:
+    """The demo's steps: identify each path, the refinement loop, the report, the firmware of each path."""
+    return 3 + int(report) + 2 * int(firmware)
 
-    def __init__(self, quiet: bool):
+
+class _Steps:
+    """One line per step on stderr, ``demo [2/6] simulate and identify the FF path ... (at 2 s)`` (none with
+    --quiet), with the seconds since the demo started."""
+
+    def __init__(self, quiet: bool, total: int):
         self.quiet = quiet
+        self.total = total
         self.count = 0
         self.started = time.perf_counter()
 
     def __call__(self, text: str) -> None:
         self.count += 1
         if not self.quiet:
-            sys.stderr.write(f"demo [{self.count}/{STEPS}] {text} (at {time.perf_counter() - self.started:.0f} s)\n")
+            elapsed = time.perf_counter() - self.started
+            sys.stderr.write(f"demo [{self.count}/{self.total}] {text} (at {elapsed:.0f} s)\n")
             sys.stderr.flush()
 
 
 def _demo(args, work: Path, outdir: Path) -> None:
     """The demo's job, writing into ``work``; messages name the files by their final place in ``outdir``."""
-    step = _Steps(args.quiet)
+    step = _Steps(args.quiet, step_count(not args.no_report, not args.no_firmware))
     print(f"helmet-anc demo: short synthetic sessions of the seed's appendix-A plants in {outdir}/")
     models = {}
     for k, path in enumerate(("fb", "ff")):
