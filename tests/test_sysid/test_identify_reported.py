@@ -78,3 +78,25 @@ def test_a_model_kept_from_the_seed_grid_records_its_own_gamma(sessions, monkeyp
     assert result.model is result.seed_model and not info["refined"]
     assert info["gamma"] == result.grid.chosen.gamma == info["seed_choice"]["gamma"]
     assert info["refinement"]["start_gamma"] == 7 and "rejected" in info["refinement"]
+
+
+@pytest.mark.parametrize("label", ["grid gamma=820, walked", "grid gamma=820, walked, freed pole dropped",
+                                   "order 7 + real pole, walked"])
+def test_the_labels_a_walked_delay_produces_are_never_read_for_the_gamma(label, sessions, monkeypatch):
+    """A pick moved behind a walked delay carries labels like these (sysid.estimation.delay.trials); the gamma
+    it records is the candidate's own, 820 here, never a number parsed out of the label."""
+    import dataclasses
+
+    pipeline = importlib.import_module("sysid.identify")
+    settle = pipeline._settle
+
+    def walked(pick, pick_rms, block, data):
+        pick, pick_rms = settle(pick, pick_rms, block, data)
+        return dataclasses.replace(pick, start=label, gamma=820), pick_rms
+
+    monkeypatch.setattr(pipeline, "_settle", walked)
+    session = sessions["ff"]
+    result = identify(session.noise, session.sweeps, "ff", FAST_OPTIONS)
+    info = result.model.identification
+    assert info["refinement"]["start"] == label and info["refinement"]["start_gamma"] == 820
+    assert info["gamma"] == (820 if info["refined"] else result.grid.chosen.gamma)
