@@ -14,12 +14,12 @@ stopped, and gives per helmet a nominal model with a multiplicative uncertainty 
 """
 
 from .job import BatchResult, run_batch
-from .manifest import SessionEntry, read_sessions
+from .manifest import SessionEntry, Skipped, find_sessions, read_sessions
 from .nominal import NominalModel, nominal_model
 from .riders import RiderSpread, rider_variant
 from .runners import run_dask, run_local
 from .simulated import write_simulated_campaign
 from .task import SessionTask, input_hash, run_session
 
-__all__ = ["BatchResult", "run_batch", "SessionEntry", "read_sessions", "NominalModel", "nominal_model",
+__all__ = ["BatchResult", "run_batch", "SessionEntry", "Skipped", "find_sessions", "read_sessions", "NominalModel", "nominal_model",
            "RiderSpread", "rider_variant", "run_dask", "run_local", "write_simulated_campaign", "SessionTask", "input_hash", "run_session"]

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 from sysid.core.model import Model
 from sysid.identify import IdentificationOptions
 
-from .manifest import SessionEntry, read_sessions, safe_name
+from .manifest import SessionEntry, Skipped, find_sessions, safe_name
 from .nominal import NominalModel, nominal_model
 from .outputs import BATCH_FORMAT, OutputLayout, atomic_write_text, prepare_outdir, write_json
 from .runners import DEFAULT_RETRIES, run_dask, run_local
@@ -35,6 +35,7 @@ class BatchResult:
     rows: list[dict]
     nominals: dict = field(default_factory=dict)  # (helmet, path) -> NominalModel
     layout: OutputLayout | None = None
+    skipped: list[Skipped] = field(default_factory=list)  # folders below SESSIONS that are no complete session
 
     @property
     def failed(self) -> int:
@@ -55,12 +56,17 @@ def run_batch(sessions, outdir, *, workers: int | None = None, scheduler=None, r
     ``dask.distributed.Client``) sends the tasks to a Dask cluster; otherwise a local
     pool of ``workers`` processes (default: the cores) runs them. ``refine`` adds
     ``refine --auto`` after identification. ``progress(done, total, row)`` is called
-    after each session, resumed ones included. ``outdir`` must be new, empty or an
+    after each session, resumed ones included, and first for each folder skipped (``done`` 0,
+    ``row["status"]`` "skipped", ``row["reason"]`` what it lacks; also ``BatchResult.skipped``). ``outdir`` must be new, empty or an
     earlier batch's output holding nothing else (``outputs.prepare_outdir``); ``force``
     writes beside files that are not ours (never removing them).
     """
     options = options or IdentificationOptions()
-    entries: list[SessionEntry] = list(sessions) if isinstance(sessions, (list, tuple)) else read_sessions(sessions)
+    entries: list[SessionEntry]
+    entries, skipped = (list(sessions), []) if isinstance(sessions, (list, tuple)) else find_sessions(sessions)
+    if progress and skipped:
+        for folder in skipped:
+            progress(0, len(entries), {"session": folder.folder, "status": "skipped", "reason": folder.reason})
     layout = prepare_outdir(outdir, [name for entry in entries for name in entry.files], force)
     write_json(layout.marker, {"format": BATCH_FORMAT, "refine": refine, "options": asdict(options),
                                "sessions": len(entries)})
@@ -92,7 +98,7 @@ def run_batch(sessions, outdir, *, workers: int | None = None, scheduler=None, r
     write_table(layout, ordered)
     nominals = _nominals(layout, ordered)
     write_summary(layout, ordered, nominals)
-    return BatchResult(ordered, nominals, layout)
+    return BatchResult(ordered, nominals, layout, skipped)
 
 
 def _nominals(layout: OutputLayout, rows: list[dict]) -> dict[tuple[str, str], NominalModel]:

@@ -4,7 +4,8 @@ A session is one path (fb or ff) of one helmet on one head in one fit condition:
 white-noise recording and two repeated sweeps (design.md, "Recordings").
 
 Folder layout: every folder below SESSIONS that holds ``noise.wav``, ``sweep1.wav`` and
-``sweep2.wav`` is a session. Its path relative to SESSIONS names it: the first part is
+``sweep2.wav`` is a session; a folder holding some of them but not all is skipped, and
+``find_sessions`` names it with what it lacks (the command line lists each). Its path relative to SESSIONS names it: the first part is
 the helmet, the second the head (rider or dummy), the rest the fit condition; a last
 part ``fb`` or ``ff`` names the path (otherwise the path is fb). ``H1/rider03/loose/ff``
 is helmet H1, head rider03, condition loose, FF path.
@@ -23,7 +24,7 @@ from pathlib import Path
 from sysid.core.errors import HelmetAncError
 from sysid.core.model import PATHS
 
-__all__ = ["SessionEntry", "read_sessions", "safe_name", "SESSION_FILES", "MANIFEST_COLUMNS"]
+__all__ = ["SessionEntry", "Skipped", "read_sessions", "find_sessions", "safe_name", "SESSION_FILES", "MANIFEST_COLUMNS"]
 
 SESSION_FILES = ("noise.wav", "sweep1.wav", "sweep2.wav")
 MANIFEST_COLUMNS = ("helmet", "head", "condition", "path", "noise", "sweep1", "sweep2")
@@ -57,28 +58,47 @@ def safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9.+-]+", "-", text).strip("-.") or "x"
 
 
+@dataclass(frozen=True)
+class Skipped:
+    """A folder below SESSIONS that holds some session files but not all: not a session, and why."""
+
+    folder: str  # relative to SESSIONS
+    reason: str
+
+
 def read_sessions(source) -> list[SessionEntry]:
     """The sessions of a folder of session folders or of a CSV manifest, in a stable order."""
+    return find_sessions(source)[0]
+
+
+def find_sessions(source) -> tuple[list[SessionEntry], list[Skipped]]:
+    """(the sessions, the folders skipped with the reason) of a folder of session folders or of a CSV manifest
+    (which skips nothing: a bad row is an error)."""
     source = Path(source)
+    skipped: list[Skipped] = []
     if source.is_dir():
-        entries = _from_folder(source)
+        entries, skipped = _from_folder(source)
     elif source.is_file():
         entries = _from_manifest(source)
     else:
         raise HelmetAncError(f"{source}: no such folder or manifest; give a folder of session folders or a CSV file")
     if not entries:
-        raise HelmetAncError(f"{source}: no sessions found (a session folder holds {', '.join(SESSION_FILES)})")
+        lacking = "; ".join(f"{s.folder} {s.reason}" for s in skipped[:3]) + ("; ..." if len(skipped) > 3 else "")
+        raise HelmetAncError(f"{source}: no sessions found (a session folder holds {', '.join(SESSION_FILES)})"
+                             + (f"; skipped {len(skipped)} folder(s): {lacking}" if skipped else ""))
     _check_unique(source, entries)
-    return entries
+    return entries, skipped
 
 
-def _from_folder(root: Path) -> list[SessionEntry]:
-    entries = []
-    for noise in sorted(root.rglob(SESSION_FILES[0])):
-        folder = noise.parent
-        if not all((folder / name).is_file() for name in SESSION_FILES[1:]):
-            missing = [name for name in SESSION_FILES[1:] if not (folder / name).is_file()]
-            raise HelmetAncError(f"{folder}: session folder lacks {', '.join(missing)}")
+def _from_folder(root: Path) -> tuple[list[SessionEntry], list[Skipped]]:
+    entries, skipped = [], []
+    folders = sorted({p.parent for name in SESSION_FILES for p in root.rglob(name) if p.is_file()})
+    for folder in folders:
+        missing = [name for name in SESSION_FILES if not (folder / name).is_file()]
+        if missing:
+            skipped.append(Skipped(str(folder.relative_to(root)) if folder != root else ".",
+                                   f"lacks {', '.join(missing)}"))
+            continue
         parts = list(folder.relative_to(root).parts) if folder != root else [root.resolve().name]
         path = "fb"
         if len(parts) > 1 and parts[-1] in PATHS:
@@ -86,7 +106,7 @@ def _from_folder(root: Path) -> list[SessionEntry]:
         helmet, head, condition = parts[0], "/".join(parts[1:2]), "/".join(parts[2:])
         files = [str((folder / name).resolve()) for name in SESSION_FILES]
         entries.append(SessionEntry(helmet, head, condition, path, *files))
-    return entries
+    return entries, skipped
 
 
 def _from_manifest(manifest: Path) -> list[SessionEntry]:

@@ -23,6 +23,7 @@ from .manifest import (MANIFEST_FORMAT, Manifest, check_output, json_ready, mani
                        write_directory)
 from .plan import plan_firmware
 from .render import render_files, render_template
+from .verify import format_verification_table as _verification_table
 from .verify import load_sweeps, verify_host
 
 __all__ = ["MANIFEST_FORMAT", "Manifest", "format_verification_table", "generate_controller_firmware",
@@ -120,30 +121,5 @@ def generate_controller_firmware(controller, outdir, *, variant: str = "both", m
 
 
 def format_verification_table(manifest: Manifest | dict) -> str:
-    """Plain-text table: one row per sweep and variant with LSB/float differences and SNRs."""
-    data = manifest.data if isinstance(manifest, Manifest) else manifest
-    title = f"{data['name']} ({data['model']['path'].upper()}, {data['target']}, {data['board']['fs']:g} Hz)"
-    predicted = data.get("predicted", {})
-    verification = data.get("verification")
-    lines = [title]
-    header = f"{'sweep':<24} {'variant':<7} {'samples':>8} {'vs reference':>16} {'SNR vs float64':>15} {'predicted':>10}"
-    lines.append(header)
-    lines.append("-" * len(header))
-    if not verification:
-        for variant, figures in predicted.items():
-            lines.append(f"{'(not verified)':<24} {variant:<7} {'':>8} {'':>16} {'':>15} {figures['snr_db']:>8.1f}dB")
-        return "\n".join(lines)
-    for row in verification["sweeps"]:
-        for variant in ("q15", "float"):
-            if variant not in row:
-                continue
-            figures = row[variant]
-            if "max_lsb_difference" in figures:
-                agreement = f"{figures['max_lsb_difference']} LSB"
-            else:
-                agreement = "bit-exact" if figures["bit_exact"] else f"{figures['max_relative_difference']:.2g}"
-            snr = figures["snr_vs_float64_db"]
-            snr_text = "exact" if snr is None else f"{snr:.1f}dB"
-            lines.append(f"{row['sweep'][:24]:<24} {variant:<7} {row['samples']:>8} {agreement:>16} "
-                         f"{snr_text:>15} {predicted[variant]['snr_db']:>8.1f}dB")
-    return "\n".join(lines)
+    """``codegen.verify.format_verification_table`` of a manifest (or its data)."""
+    return _verification_table(manifest.data if isinstance(manifest, Manifest) else manifest)

@@ -17,11 +17,14 @@ from sysid.core.errors import HelmetAncError
 from sysid.io.recordings import RecordingWarning
 
 from . import commands as command_package
+from .effect_modules import add_effect_module_option, load_effect_modules
 from .pipes import quiet_on_closed_stdout
 
 __all__ = ["main", "build_parser"]
 
 EXIT_USAGE = 2
+# The subcommands that read effects by name (--effect, --add, the detectors): they take --effect-module.
+EFFECT_COMMANDS = ("simulate", "diagnose", "refine", "report")
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, what a shell reports for Ctrl-C
 
 # One example per subcommand, shown at the end of its --help.
@@ -82,6 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, sub in commands.choices.items():
         if name in EXAMPLES and not sub.epilog:
             sub.epilog = "example: " + EXAMPLES[name]
+        if name in EFFECT_COMMANDS:
+            add_effect_module_option(sub)
     return parser
 
 
@@ -106,14 +111,17 @@ def _main(argv) -> int:
 
         return _run_interruptible(lambda: firmware_main(rest[1:] + global_options, prog="helmet-anc generate-firmware"))
     args = build_parser().parse_args(argv)
-    # Warnings about the inputs are shown when the command has run: a bad input then reads
-    # as its one error line, not as warnings about the same file followed by the error.
-    pending = []
-    previous = warnings.showwarning
-    warnings.showwarning = lambda message, *rest, **named: pending.append(_one_line(message))
+    # Warnings about the inputs (clipping, a DC offset) come before the results they qualify: held
+    # until the command first writes to stdout, then shown, then shown as they come. A bad input
+    # still reads as its one error line, not as warnings about the same file followed by the error.
+    held = _HeldWarnings()
+    previous, stdout = warnings.showwarning, sys.stdout
+    warnings.showwarning = lambda message, *rest, **named: held.add(_one_line(message))
+    sys.stdout = _ReleasingStream(stdout, held.release)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always", RecordingWarning)
+            load_effect_modules(getattr(args, "effect_module", None) or [])
             status = args.handler(args)
     except HelmetAncError as exc:
         sys.stderr.write(f"helmet-anc {args.command}: error: {exc}\n")
@@ -123,8 +131,45 @@ def _main(argv) -> int:
         return EXIT_INTERRUPTED
     finally:
         warnings.showwarning = previous
-    sys.stderr.write("".join(pending))
+        sys.stdout = stdout
+    held.release()
     return status
+
+
+class _HeldWarnings:
+    """Warning lines held until ``release`` (the command's first output), then written as they come."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+        self.released = False
+
+    def add(self, line: str) -> None:
+        if self.released:
+            sys.stderr.write(line)
+        else:
+            self.lines.append(line)
+
+    def release(self) -> None:
+        if not self.released:
+            self.released = True
+            sys.stderr.write("".join(self.lines))
+            sys.stderr.flush()
+
+
+class _ReleasingStream:
+    """A text stream that calls ``before_first_write`` once, before its first write, then writes through."""
+
+    def __init__(self, stream, before_first_write):
+        self._stream = stream
+        self._before = before_first_write
+
+    def write(self, text):
+        if text:
+            self._before()
+        return self._stream.write(text)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def _run_interruptible(run) -> int:

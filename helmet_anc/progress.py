@@ -1,10 +1,12 @@
-"""Progress on stderr for steps that take seconds: an elapsed-time line, only on a terminal.
+"""Progress on stderr for steps that take seconds: a spinner on a terminal, one line per step in a pipe.
 
-``with busy("refine --auto", quiet=args.quiet): ...`` redraws ``refine --auto ... 12 s`` once a
-second on stderr while the block runs, and erases it at the end. Nothing is drawn when
-stderr is not a terminal (pipes, files, CI logs) or with ``--quiet``, and nothing for
-blocks shorter than ``after_s``. For steps with a known count of parts the grid search
-has its own bar (``sysid.estimation.grid.terminal_progress``).
+``with busy("refine --auto", quiet=args.quiet) as step: ...`` redraws ``refine --auto ... 12 s``
+once a second on stderr while the block runs, and erases it at the end; ``step("step 2: adding
+delay")`` names what is running now (``refine --auto: step 2: adding delay ... 12 s``). When stderr
+is not a terminal (pipes, files, CI logs) nothing is redrawn: each ``step`` is one line,
+``refine --auto: step 2: adding delay``, so a log shows where a long run is. Nothing at all with
+``--quiet``; on a terminal nothing for blocks shorter than ``after_s``. For steps with a known
+count of parts the grid search has its own bar (``sysid.estimation.grid.terminal_progress``).
 """
 
 from __future__ import annotations
@@ -20,27 +22,46 @@ __all__ = ["busy"]
 @contextmanager
 def busy(label: str, quiet: bool = False, stream=None, after_s: float = 2.0, every_s: float = 1.0):
     stream = stream or sys.stderr
-    if quiet or not stream.isatty():
-        yield
+    if quiet:
+        yield lambda text: None
+        return
+    if not stream.isatty():
+        def line(text: str) -> None:
+            stream.write(f"{label}: {text}\n")
+            stream.flush()
+
+        yield line
         return
     done = threading.Event()
     started = time.monotonic()
-    drawn = [False]
+    drawn = [0]  # characters of the last line drawn
+    current = [label]
+    lock = threading.Lock()
 
     def draw():
+        with lock:
+            text = f"{current[0]} ... {time.monotonic() - started:.0f} s"
+            stream.write("\r" + text + " " * max(drawn[0] - len(text), 0))
+            stream.flush()
+            drawn[0] = len(text)
+
+    def spin():
         # The first draw waits after_s: short steps stay silent.
         while not done.wait(after_s if not drawn[0] else every_s):
-            stream.write(f"\r{label} ... {time.monotonic() - started:.0f} s")
-            stream.flush()
-            drawn[0] = True
+            draw()
 
-    thread = threading.Thread(target=draw, daemon=True)
+    def step(text: str) -> None:
+        current[0] = f"{label}: {text}"
+        if drawn[0]:
+            draw()
+
+    thread = threading.Thread(target=spin, daemon=True)
     thread.start()
     try:
-        yield
+        yield step
     finally:
         done.set()
         thread.join()
         if drawn[0]:
-            stream.write("\r" + " " * (len(label) + 16) + "\r")
+            stream.write("\r" + " " * drawn[0] + "\r")
             stream.flush()

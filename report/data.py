@@ -21,7 +21,7 @@ from sysid.estimation.grid import GridResult, grid_search
 from sysid.estimation.spectra import Spectra, estimate_spectra
 from sysid.findings import DiagnosisContext
 from sysid.findings.context import detector_context
-from sysid.io.recordings import Recording, check_same_rate
+from sysid.io.recordings import Recording, check_noise_length, check_same_rate
 from sysid.validation.compare import Comparison, compare
 from sysid.validation.sweeps import sweep_spectrum
 
@@ -68,9 +68,7 @@ def prepare_report_data(model, noise: Recording, sweeps: list[Recording], identi
     check_same_rate([noise, *sweeps])
     if noise.fs != model.fs:
         raise HelmetAncError(f"{noise.path}: sample rate {noise.fs:g} Hz differs from the model's {model.fs:g} Hz")
-    if noise.duration <= transient_s + 0.5:
-        raise HelmetAncError(f"{noise.path}: {noise.duration:.3g} s is too short; need more than the "
-                             f"{transient_s:g} s transient plus 0.5 s")
+    check_noise_length(noise, transient_s)
     # A Diagnosis from sysid.diagnose carries the comparison it was made with.
     comparison = getattr(findings, "comparison", None) or compare(model, sweeps)
     if findings is None:

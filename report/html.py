@@ -27,6 +27,7 @@ from . import model_figures as modelfig
 from . import validation_figures as valid
 from .data import ReportData, prepare_report_data
 from .tables import findings_table, hankel_table, history_table, matrices_html, sections_table, summary_table
+from .target import report_file
 
 __all__ = [
     "SECTIONS",
@@ -282,12 +283,11 @@ def write_report(path, model, noise, sweeps, identification=None, findings=None,
     ``identification`` (an ``Identification``) supplies spectra, grid and seed model;
     without it they are recomputed (``grid``: "modest" or "skip", see ``report.data``).
     ``findings`` defaults to ``sysid.diagnose.diagnose``'s. When path is an existing
-    folder the file is ``<path>/<fb|ff>-report.html``. The file appears only once
+    folder (or ends with a separator: a folder, which must exist; ``report.target``) the file is
+    ``<path>/<fb|ff>-report.html``. The file appears only once
     complete (written beside it and renamed). ``extra_sections``: see ``render_report``.
     """
-    target = Path(path)
-    if target.is_dir():
-        target = target / f"{model.path}-report.html"
+    target = report_file(path, model.path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise HelmetAncError(f"{target}: folder {folder} does not exist")

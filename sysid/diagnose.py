@@ -43,7 +43,7 @@ from .core.model import Model
 from .core.thresholds import TRANSIENT_S
 from .findings import DiagnosisContext, Finding
 from .findings.context import detector_context
-from .io.recordings import Recording, check_same_rate
+from .io.recordings import Recording, check_noise_length, check_same_rate
 from .validation.compare import compare
 
 __all__ = ["diagnose", "Diagnosis", "Finding", "format_findings", "DETECTORS"]
@@ -96,8 +96,7 @@ def diagnose(model: Model, noise: Recording, sweeps: list[Recording], transient_
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
     model.check_stable()
-    if noise.duration <= transient_s + 0.5:
-        raise IdentificationError(f"{noise.path}: shorter than the {transient_s:g} s transient plus 0.5 s")
+    check_noise_length(noise, transient_s)
     # One BLAS thread: the products here are small or vectors (the comparison's correlations are dot
     # products over a sweep), where a second thread gains little, and on a shared machine OpenBLAS's
     # threads wait for each other: the comparison's 150 dot products took 0.5-0.8 s of CPU and more of

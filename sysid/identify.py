@@ -53,7 +53,7 @@ from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_
 from .estimation.subspace import SubspaceDecomposition
 from .estimation.uncertainty import frequency_response_band
 from .io.lines import undriven_lines, without_lines
-from .io.recordings import Recording, RecordingFile, check_same_rate
+from .io.recordings import Recording, RecordingFile, check_noise_length, check_same_rate
 from .validation.sweeps import (VALIDATION_BAND, SweepSpectrum, check_repeats, noise_floor, repeat_lag, simulated_rms,
                                 sweep_spectrum, without_repeat_lines)
 
@@ -107,6 +107,7 @@ def _check_inputs(noise: Recording, sweeps: list[Recording], options: Identifica
     if len(sweeps) != 2:
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
+    check_noise_length(noise, options.transient_s)
     lag = repeat_lag(*sweeps)
     check_repeats(*sweeps, lag=lag)
     return lag
@@ -206,7 +207,9 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
                                                            rejected="validated worse than the seed grid's choice")
             result_model = seed_model
     final_rms = seed_rms if result_model is seed_model else refined_rms
-    start_gamma = result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma)
+    # A model kept from the seed grid records its own gamma, not the one the rejected refinement started from.
+    start_gamma = (chosen.gamma if result_model is seed_model
+                   else result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma))
     result_model.identification.update({
         "gamma": start_gamma,
         "order": result_model.order,

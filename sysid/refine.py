@@ -255,7 +255,7 @@ def _allowed(effect: str, rejected: dict[str, int], retried: set[str], accepted:
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
-                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S) -> AutoRefinement:
+                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S, progress=None) -> AutoRefinement:
     """Diagnose -> add the top significant structure or correction -> refit, monotone and bounded.
 
     A step is kept only if it lowers the validation rms by more than the run-to-run
@@ -267,8 +267,10 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     stretches, output offset: effects with a ``correct``) are applied together before one
     re-identification (``refine_corrections``), one step naming each; kept when it passes
     the rule of any of them, and tried one at a time if not. ``stop_reason`` says why it stopped: "at the floor",
-    "nothing left that lowers the error", "effects that cannot be modelled: ...".
+    "nothing left that lowers the error", "effects that cannot be modelled: ...". ``progress(text)``, when
+    given, is told what each step does as it starts ("step 2: adding delay").
     """
+    say = progress or (lambda text: None)
     start = current = compare(model, sweeps)
     steps: list[RefinementStep] = []
     rejected: dict[str, int] = {}  # effect -> accepted steps before it was rejected
@@ -278,6 +280,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     diagnosis = None  # of the current model: a rejected step leaves the model, so its diagnosis, as it was
     while len(steps) < max_steps:
         if diagnosis is None:
+            say(f"step {len(steps) + 1}: diagnose ({current.ratio:.2f}x the noise floor)")
             diagnosis = diagnose(model, noise, sweeps, transient_s, comparison=current)
         found = bounding_findings(diagnosis)
         bound, bounding = _error_bound(found)
@@ -327,6 +330,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         if not combined and chosen[0].kind in rejected:
             retried.add(chosen[0].kind)
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
+        say(f"step {len(steps) + 1}: adding {' + '.join(s.kind for s in chosen)} and refitting")
         try:
             result = (refine_corrections(model, noise, sweeps, chosen, options, transient_s, current) if combined
                       else refine(model, noise, sweeps, chosen[0], options, transient_s, current))

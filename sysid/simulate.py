@@ -3,7 +3,8 @@
 A session is one low-passed white-noise recording (identification; its first
 ``transient_s`` seconds are the filter's start-up) and two identical swept sines
 20 Hz - 4 kHz with silence around them (validation), 44.1 kHz stereo, sensor noise
-on both channels and 16-bit quantisation. The true plant is a seed appendix-A model
+on both channels and 16-bit quantisation (``SessionSpec.fs`` and ``bits`` change the rate
+and the sample format: 24 or 32-bit PCM, or float). The true plant is a seed appendix-A model
 (or any Model). Levels are set so the ear channel peaks at ``peak_level`` of full
 scale: nothing clips.
 """
@@ -29,7 +30,8 @@ from .core.plants import appendix_a_model
 from .core.structures import series, tf_to_statespace
 from .core.thresholds import TRANSIENT_S
 from .io.data_quality import clipped_samples
-from .io.recordings import Recording, write_wav16
+from .io.recordings import Recording
+from .io.wav import quantise, write_wav
 
 __all__ = ["SessionSpec", "Session", "simulate_session", "measured_session", "write_session", "sweep_signal", "TRUTH_FORMAT",
            "SIMULATED_EFFECTS", "random_effect"]
@@ -74,6 +76,8 @@ class SessionSpec:
     peak_level: float = 0.5
     output_noise: float = 2e-4
     input_noise: float = 2e-5
+    # Sample format of the recordings (sysid.io.wav.SAMPLE_FORMATS): 16, 24 or 32-bit PCM, or float.
+    bits: str = "16"
 
 
 @dataclass
@@ -99,9 +103,6 @@ def sweep_signal(spec: SessionSpec) -> np.ndarray:
     silence = np.zeros(int(round(spec.sweep_silence * spec.fs)))
     return np.concatenate((silence, sweep, silence))
 
-
-def _quantise16(x: np.ndarray) -> np.ndarray:
-    return np.clip(np.round(x * 32768.0), -32768, 32767) / 32768.0
 
 
 def simulate_session(spec: SessionSpec | None = None, plant: Model | FirPlant | None = None, effects=()) -> Session:
@@ -165,8 +166,8 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | FirPlant | 
         y_long = plant.simulate(u_long)
         y_clean = _hidden_output_effects(hidden, y_long, u_clean.size, timeline[index], timeline[-1], spec.fs,
                                          records, effect_rng, index)
-        u = _quantise16(u_clean + input_noise * rng.standard_normal(u_clean.size) + _dc(hidden, 0))
-        y = _quantise16(y_clean + spec.output_noise * rng.standard_normal(y_clean.size) + _dc(hidden, 1))
+        u = quantise(u_clean + input_noise * rng.standard_normal(u_clean.size) + _dc(hidden, 0), spec.bits)
+        y = quantise(y_clean + spec.output_noise * rng.standard_normal(y_clean.size) + _dc(hidden, 1), spec.bits)
         return u, y
 
     u, y = record(0, noise_gain * noise_in)
@@ -328,7 +329,7 @@ def write_session(session: Session, outdir) -> dict[str, Path]:
     # Write each file beside its final name and rename, so a failure leaves no partial session file.
     recordings = {"noise": session.noise, "sweep1": session.sweeps[0], "sweep2": session.sweeps[1]}
     for key, recording in recordings.items():
-        atomic_write(files[key], lambda tmp, r=recording: write_wav16(tmp, r.u, r.y, r.fs))
+        atomic_write(files[key], lambda tmp, r=recording: write_wav(tmp, r.u, r.y, r.fs, session.spec.bits))
     atomic_write_text(files["truth"], json.dumps(session.truth, indent=2) + "\n")
     return files
 

@@ -70,6 +70,25 @@ def prepare(folder: Path, session: dict, model_file: Path) -> dict[str, str]:
     write_wav16(files["silent_ear"], u, np.zeros_like(y), fs)
     files["swapped"] = folder / "sweep1_swapped.wav"
     write_wav16(files["swapped"], y, u, fs)
+    _, second = scipy.io.wavfile.read(session["sweep2"])
+    u2, y2 = second[:, 0] / 32768.0, second[:, 1] / 32768.0
+    files["half_level"] = folder / "sweep2_half_level.wav"
+    write_wav16(files["half_level"], 0.5 * u2, 0.5 * y2, fs)
+    # The same sweep stretched to 1.25 times its length: another excitation, not a repeat.
+    stretched = np.linspace(0.0, u2.size - 1.0, int(1.25 * u2.size))
+    files["longer"] = folder / "sweep2_longer.wav"
+    write_wav16(files["longer"], *(np.interp(stretched, np.arange(u2.size), x) for x in (u2, y2)), fs)
+    noise_fs, noise = scipy.io.wavfile.read(session["noise"])
+    for key, seconds in (("noise_half_s", 0.5), ("noise_2s", 2.0)):
+        files[key] = folder / f"noise_{seconds:g}s.wav"
+        scipy.io.wavfile.write(files[key], noise_fs, noise[:int(seconds * noise_fs)])
+    files["noise_truncated"] = folder / "noise_truncated.wav"  # the header promises the whole recording
+    files["noise_truncated"].write_bytes(Path(session["noise"]).read_bytes()[:44 + 4 * int(2.0 * noise_fs)])
+    files["controller"] = folder / "controller.json"
+    files["controller"].write_text(json.dumps({"format": "helmet-anc/controller@1", "fs": model["fs"],
+                                               "internal_model": model, "ff": None, "fb": None, "latency_samples": 2}))
+    files["broken_effect"] = folder / "broken_effect.py"
+    files["broken_effect"].write_text("from sysid.effects import Effect, register\nregister(Effect(name=))\n")
     return {key: str(path) for key, path in files.items()}
 
 
@@ -118,6 +137,30 @@ CASES = (
     BadInput("an unknown effect", ("simulate", "{folder}/s", "--effect", "reverb:3"), "effect"),
     BadInput("an effect parameter that is not a number", ("simulate", "{folder}/s", "--effect", "delay:abc"),
              "delay"),
+    BadInput("the second sweep at half the level of the first", ("compare", "{model}", "--sweep", "{sweep1}",
+                                                                  "--sweep", "{half_level}"), "-6.0 dB"),
+    BadInput("a second sweep of another length (not a repeat)",
+             ("identify", "--noise", "{noise}", "--sweep", "{sweep1}", "--sweep", "{longer}", "-o", "{folder}/m.json"),
+             "do not repeat each other"),
+    BadInput("a noise recording of 0.5 s", ("identify", "--noise", "{noise_half_s}", *_SWEEPS, "-o", "{folder}/m.json"),
+             "is too short; it needs more than 3.8 s"),
+    BadInput("a noise recording of 2 s", ("diagnose", "{model}", "--noise", "{noise_2s}", *_SWEEPS),
+             "is too short; it needs more than 3.8 s"),
+    BadInput("a noise WAV cut short (header promises more)", ("report", "{model}", "--noise", "{noise_truncated}",
+                                                              *_SWEEPS, "-o", "{folder}/r.html"), "is too short"),
+    BadInput("simulate --noise-seconds 3.04", ("simulate", "{folder}/s", "--noise-seconds", "3.04"),
+             "needs more than 3.8 s"),
+    BadInput("simulate --fs 8000", ("simulate", "{folder}/s", "--fs", "8000"), "--fs must be between"),
+    BadInput("a controller given as the model to compare", ("compare", "{controller}", *_SWEEPS),
+             "this is a controller (helmet-anc/controller@1), not a model"),
+    BadInput("a controller given as the model to refine", ("refine", "{controller}", *_RECORDINGS, "--auto",
+                                                           "-o", "{folder}/r.json"), "this is a controller"),
+    BadInput("--report into a folder that does not exist", ("identify", *_RECORDINGS, "-o", "{folder}/m.json",
+                                                             "--report", "{folder}/reps/"), "does not exist"),
+    BadInput("--effect-module that does not exist", ("simulate", "{folder}/s", "--effect-module", "{folder}/none.py",
+                                                     "--effect", "notch:1200"), "no such file"),
+    BadInput("--effect-module that does not load", ("simulate", "{folder}/s", "--effect-module", "{broken_effect}",
+                                                    "--effect", "notch:1200"), "does not load (SyntaxError"),
 )
 
 

@@ -11,12 +11,12 @@ import numpy as np
 import scipy.optimize
 import scipy.signal
 
-from sysid.effect_spec import ParameterSpec
+from sysid.core.effect_spec import ParameterSpec
+from sysid.core.thresholds import EXCESS, EXPLAINS_GAIN
 from sysid.effects import Effect, register
 from sysid.findings import finding
 from sysid.findings.dynamics import sweep_bins
 from sysid.refits import series_factor
-from sysid.thresholds import EXCESS, EXPLAINS_GAIN
 
 F0_RANGE = (30.0, 4000.0)
 Q_RANGE = (1.0, 50.0)

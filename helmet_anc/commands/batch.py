@@ -33,6 +33,11 @@ def register(commands) -> None:
 
 
 def _progress(done: int, total: int, row: dict) -> None:
+    if row["status"] == "skipped":
+        # A folder with some session files but not all: listed before any work, never silently left out.
+        sys.stderr.write(f"skipped {row['session']}: {row['reason']}\n")
+        sys.stderr.flush()
+        return
     state = "resumed" if row.get("resumed") else row["status"]
     if row["status"] != "ok":
         detail = f": {row['reason']}"
@@ -56,7 +61,9 @@ def run(args) -> int:
                        refine=args.refine, options=options, progress=_progress, force=args.force)
     layout = result.layout
     print(f"{len(result.rows)} session(s): {len(result.rows) - result.failed} identified "
-          f"({result.resumed} from an earlier run), {result.failed} failed")
+          f"({result.resumed} from an earlier run), {result.failed} failed"
+          + (f"; {len(result.skipped)} folder(s) skipped: " + "; ".join(f"{s.folder} {s.reason}" for s in result.skipped)
+             if result.skipped else ""))
     for (helmet, path), nominal in result.nominals.items():
         info = nominal.model.identification
         print(f"helmet {helmet} {path}: nominal order {nominal.model.order}, bound mean {info['mean_relative_bound']:.3g}, "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from report.target import report_file
 from sysid.core.errors import HelmetAncError
 from sysid.core.files import check_output_file
 from sysid.core.model import Model
@@ -69,12 +70,16 @@ def check_output(path: str, args=None, option: str = "-o") -> Path:
                              force=bool(getattr(args, "force", False)), option=option)
 
 
-def check_report_target(path: str | None, args=None) -> Path | None:
-    """The --report target: an existing folder, or a file whose folder exists (checked before any work)."""
+def check_report_target(path: str | None, args=None, kind: str = "fb", option: str = "--report") -> Path | None:
+    """The --report file, checked before any work (as ``-o``): the file given, or ``<folder>/<kind>-report.html``
+    for an existing folder (``report.target``: a path ending with a separator is a folder, which must exist)."""
     if path is None:
         return None
-    target = Path(path)
-    return target if target.is_dir() else check_output(path, args, "--report")
+    try:
+        target = report_file(path, kind)
+    except HelmetAncError as exc:
+        raise HelmetAncError(f"{option} {exc}") from None
+    return check_output(target, args, option)
 
 
 def identification_summary(result: Identification) -> str:
@@ -92,7 +97,12 @@ def identification_summary(result: Identification) -> str:
                      f"{info['refinement'].get('start', 'gamma ' + str(info['refinement']['start_gamma']))}, rms {result.refined_rms:.3e} FS "
                      f"({result.refined_rms / result.noise_floor:.2f}x noise floor)")
     kind = "refined" if info["refined"] else "seed grid"
-    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
+    refinement = info.get("refinement", {})
+    order = f"order {model.order}"
+    if info["refined"] and refinement.get("order") not in (None, model.order):
+        # The order search's pick, then states the data did not ask for left out (sysid.estimation.reduction).
+        order += f" (reduced from {refinement['order']}: {refinement.get('reduced') or 'states left out'})"
+    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, {order}, rms {info['rms']:.3e} FS, "
                  f"noise floor {result.noise_floor:.3e} FS, {'stable' if model.stable else 'UNSTABLE'} "
                  f"(largest pole radius {model.spectral_radius:.6f})")
     return "\n".join(lines)

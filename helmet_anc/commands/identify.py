@@ -34,7 +34,7 @@ def run(args) -> int:
     output = check_output(args.output, args)
     table = check_output(output.with_name(output.stem + ".grid.csv"), args, "-o (grid table)")
     mat = check_output(args.mat, args, "--mat") if args.mat else None
-    report_target = check_report_target(args.report, args)
+    report_target = check_report_target(args.report, args, args.path)
     options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
                                     feedthrough=args.feedthrough)

@@ -33,19 +33,21 @@ def run(args) -> int:
         raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
     specs = [parse_refinement(text) for text in args.add]
     output = check_output(args.output, args)
-    report_target = check_report_target(args.report, args)
     model = Model.load(args.model)
+    report_target = check_report_target(args.report, args, model.path)
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
     stop_reason = None
     if args.auto:
-        with busy("refine --auto: diagnose, add, refit", args.quiet):
-            auto = refine_auto(model, noise, sweeps)
+        # One line per step when stderr is a pipe; the spinner names the step on a terminal.
+        with busy("refine --auto", args.quiet) as step:
+            auto = refine_auto(model, noise, sweeps, progress=step)
         model, steps, stop_reason = auto.model, auto.steps, auto.stop_reason
     else:
         steps = []
         for spec in specs:
-            with busy(f"refine: adding {spec.kind}", args.quiet):
+            with busy("refine", args.quiet) as step:
+                step(f"adding {spec.kind} and refitting")
                 result = refine(model, noise, sweeps, spec)
             steps.append(result.step)
             model = result.model

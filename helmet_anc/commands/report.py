@@ -7,7 +7,7 @@ from sysid.core.errors import HelmetAncError
 from sysid.io.recordings import load_recording
 
 from ..progress import busy
-from .common import add_force_option, add_recording_options, check_output, load_model, load_sweeps
+from .common import add_force_option, add_recording_options, check_report_target, load_model, load_sweeps
 
 ORDER = 60
 
@@ -22,7 +22,8 @@ def register(commands) -> None:
     parser.add_argument("--controller", metavar="controller.json",
                         help="add a control section for this controller (helmet-anc design): attenuation predicted on "
                              "its model vs achieved on this report's model, sensitivity, Nyquist, refinement table")
-    parser.add_argument("-o", "--output", required=True, metavar="report.html")
+    parser.add_argument("-o", "--output", required=True, metavar="report.html",
+                        help="the report file, or a folder (existing, or written with a trailing /) for <fb|ff>-report.html")
     add_force_option(parser)
     parser.set_defaults(handler=run)
 
@@ -56,10 +57,11 @@ def control_section(path: str, model, dpi: float) -> tuple[str, str, str]:
 
 
 def run(args) -> int:
-    output = check_output(args.output, args)
     if not 20.0 <= args.dpi <= 400.0:
         raise HelmetAncError(f"--dpi must be between 20 and 400; found {args.dpi:g}")
     model = load_model(args.model)
+    # A folder (existing, or named with a trailing separator) gets <fb|ff>-report.html (report.target).
+    output = check_report_target(args.output, args, model.path, "-o")
     noise = load_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)
     from report.html import write_report

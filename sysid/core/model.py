@@ -283,6 +283,11 @@ class Model:
     def from_dict(cls, data: dict) -> "Model":
         if not isinstance(data, dict):
             raise ModelError("model must be a JSON object")
+        tag = data.get("format")
+        if isinstance(tag, str) and tag.startswith("helmet-anc/") and tag != MODEL_FORMAT:
+            # Another of our files (a controller, a comparison, a session's truth): say which, not what it lacks.
+            raise ModelError(f"this is a {tag.split('/', 1)[1].split('@')[0]} ({tag}), not a model; give the model "
+                             "JSON (e.g. from identify -o)")
         missing = [key for key in _REQUIRED_KEYS if key not in data]
         if missing:
             raise ModelError(f"model is missing key(s): {', '.join(missing)}")

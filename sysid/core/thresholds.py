@@ -9,7 +9,7 @@ otherwise. Detectors and ``refine`` import them from here, so the meaning of
 from __future__ import annotations
 
 __all__ = ["AT_FLOOR", "EXCESS", "UNDER_MODELLED_EXCESS", "EXPLAINS_GAIN", "FACTOR_EXPLAINS", "WORSE",
-           "IDENTIFICATION_BAND", "TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG",
+           "IDENTIFICATION_BAND", "TRANSIENT_S", "NOISE_AFTER_TRANSIENT_S", "MAX_AUTO_STEPS", "RUN_TO_RUN_MIN", "LEADING_PHASE_DEG",
            "LINE_RATIO"]
 
 # Validation rms at most this many times the noise floor counts as at the floor.
@@ -33,6 +33,11 @@ WORSE = 1.02
 IDENTIFICATION_BAND = (20.0, 5000.0)
 # The first seconds of a noise recording are transient (design.md, "Who uses it").
 TRANSIENT_S = 3.0
+# A noise recording must hold more than this after its transient (s): identify, diagnose and report
+# alike (sysid.io.recordings.check_noise_length). The most any of them needs: the time-variation and
+# clock-drift detectors compare 8 segments of 4410 samples (10 Hz resolution), 0.8 s at 44.1 kHz;
+# identify needs one averaging segment of the 20 Hz grid (0.05 s).
+NOISE_AFTER_TRANSIENT_S = 0.8
 
 # ``refine --auto``: at most this many steps; a step is kept only if it lowers the validation rms
 # by more than the run-to-run noise of that figure, and never by less than this fraction.
@@ -184,8 +189,15 @@ MAX_EXTRA_DELAY = 120
 VALIDATION_BAND = (20.0, 4000.0)
 # Each sweep's first seconds are left out of the validation rms and the noise floor.
 SKIP_S = 0.05
+# Two sweeps repeat one excitation (sysid.validation.sweeps.check_repeats) when their inputs, aligned,
+# correlate at least this much (they share more than the input channel's noise holds apart) and when
+# a level difference between them does not make up most of their ear difference: the band rms of
+# the difference falls by no more than this factor once the second ear is scaled to the first's level
+# (sqrt 2: the level difference's share at most equal to the noise's).
+REPEAT_CORRELATION = 0.5
+REPEAT_FLOOR_INFLATION = 2.0**0.5
 
-__all__ += ["VALIDATION_BAND", "SKIP_S"]
+__all__ += ["VALIDATION_BAND", "SKIP_S", "REPEAT_CORRELATION", "REPEAT_FLOOR_INFLATION"]
 
 
 
@@ -196,20 +208,26 @@ __all__ += ["VALIDATION_BAND", "SKIP_S"]
 # The ear channel heard (sysid.io.ear_channel). An ear channel below half a 16-bit LSB (RMS) is
 # digital silence: nothing is connected.
 SILENT_RMS = 2.0**-16
-# Median magnitude-squared coherence between input and ear channel, in EAR_COHERENCE_BAND_HZ, below
-# which the ear microphone does not hear the path at all. It is estimated on stretches short enough
-# that an ear clock off by up to a few hundred ppm (effects.md, clock drift) slips by no more than
+# Share of the ear channel's power in EAR_COHERENCE_BAND_HZ that is coherent with the input (the
+# coherence weighted by the ear's power spectrum), below which the ear microphone does not hear the
+# path at all: judged where the path carries signal, so a path that rolls off below the sensor
+# noise above 1-2 kHz is heard (a median over the band's bins read 0.07 for one). It is estimated
+# on stretches short enough that an ear clock off by up to a few hundred ppm (effects.md, clock drift) slips by no more than
 # a few samples inside one: over a whole recording such a slip turns the cross-spectrum's phase
 # and the averaged coherence of a healthy channel collapses above a few hundred Hz (60 ppm over
 # 20 s: median 0.01). A sweep, whose every frequency is excited only briefly, is judged over the
 # whole recording instead (a stretch of it excites a few bins only): the larger of the two counts.
 UNCORRELATED_COHERENCE = 0.1
-EAR_COHERENCE_BAND_HZ = (100.0, 4000.0)
+EAR_COHERENCE_BAND_HZ = (20.0, 4000.0)
 # Welch segment of that coherence (samples), and up to EAR_COHERENCE_STRETCHES stretches of
 # EAR_COHERENCE_STRETCH samples spread over the recording.
 EAR_COHERENCE_SEGMENT = 512
 EAR_COHERENCE_STRETCH = 32 * EAR_COHERENCE_SEGMENT
 EAR_COHERENCE_STRETCHES = 8
+# Over the whole recording the segment is the longest that still gives this many averages (a short
+# one biases the coherence of a ringing path low): an unrelated ear shares about 1/64 of its power
+# coherently, and a single line's coherence exceeds 0.1 with probability 0.9^63 = 1e-3.
+EAR_COHERENCE_AVERAGES = 64
 
 # Which channel is the input (sysid.io.channels: the direction of the path's group delay).
 # Segment of the spectra: 2048 samples resolve 21.5 Hz at 44.1 kHz, enough to unwrap the
@@ -227,7 +245,7 @@ CHANNEL_ORDER_LEAD_SAMPLES = 1.0
 # At most this much of a recording is examined (s): the direction does not change along it.
 CHANNEL_ORDER_EXCERPT_S = 10.0
 __all__ += ["SILENT_RMS", "UNCORRELATED_COHERENCE", "EAR_COHERENCE_BAND_HZ", "EAR_COHERENCE_SEGMENT",
-            "EAR_COHERENCE_STRETCH", "EAR_COHERENCE_STRETCHES", "CHANNEL_ORDER_SEGMENT", "CHANNEL_ORDER_BAND_HZ",
+            "EAR_COHERENCE_STRETCH", "EAR_COHERENCE_STRETCHES", "EAR_COHERENCE_AVERAGES", "CHANNEL_ORDER_SEGMENT", "CHANNEL_ORDER_BAND_HZ",
             "CHANNEL_ORDER_COHERENT", "CHANNEL_ORDER_MIN_BINS", "CHANNEL_ORDER_LEAD_SAMPLES", "CHANNEL_ORDER_EXCERPT_S"]
 
 

@@ -82,12 +82,17 @@ def find_lines(x: np.ndarray, u: np.ndarray, fs: float, band=IDENTIFICATION_BAND
     Lines within two bins of a frequency in ``known`` (Hz) are left out.
     """
     n = x.size
+    if n < 2:
+        return []
     window = np.hanning(n)
     f = np.fft.rfftfreq(n, 1 / fs)
     width = max(9, int(NEIGHBOURHOOD_HZ * n / fs) | 1)
     # Only the band and half a neighbourhood around it: the median filter is the costly step.
     lo = max(int(np.searchsorted(f, band[0])) - width, 1)
     hi = min(int(np.searchsorted(f, band[1])) + width, f.size - 1)
+    if hi - lo < width:
+        # Fewer bins than one neighbourhood: no background to stand out from.
+        return []
     X = np.zeros(f.size)
     X[lo - 1:hi + 1] = (np.abs(np.fft.rfft((x - x.mean()) * window)) ** 2)[lo - 1:hi + 1]
     Uu = (np.abs(np.fft.rfft((u - u.mean()) * window)) ** 2)[lo:hi]

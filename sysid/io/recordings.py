@@ -36,13 +36,14 @@ from ..core.errors import RecordingError
 # checks had modules of their own: SILENT_RMS, UNCORRELATED_COHERENCE, ear_coherence, read_layout, WavLayout,
 # write_wav16, write_wav16_blocks.
 from ..core.thresholds import SILENT_RMS, UNCORRELATED_COHERENCE  # noqa: F401
+from ..core.thresholds import NOISE_AFTER_TRANSIENT_S, TRANSIENT_S
 from . import wav
 from .data_quality import clipped_samples, dc_offset
 from .ear_channel import check_ear_channel, ear_coherence  # noqa: F401
 from .wav import WavLayout, read_layout, write_wav16, write_wav16_blocks  # noqa: F401
 
 __all__ = ["Recording", "RecordingFile", "RecordingWarning", "WavLayout", "read_layout", "open_recording",
-           "load_recording", "check_same_rate", "write_wav16", "write_wav16_blocks", "recording_from_arrays",
+           "load_recording", "check_same_rate", "check_noise_length", "noise_length_rule", "write_wav16", "write_wav16_blocks", "recording_from_arrays",
            "QUALITY_BLOCK"]
 
 
@@ -278,3 +279,19 @@ def check_same_rate(recordings) -> float:
                 f"{recording.path}: sample rate {recording.fs:g} Hz differs from {fs:g} Hz of {recordings[0].path}"
             )
     return fs
+
+
+def noise_length_rule(transient_s: float = TRANSIENT_S) -> str:
+    """What a noise recording needs, in words: the one rule of ``check_noise_length`` (and of
+    ``helmet-anc simulate --noise-seconds``)."""
+    return (f"more than {transient_s + NOISE_AFTER_TRANSIENT_S:g} s (its first {transient_s:g} s are the excitation's "
+            f"start-up and are left out; at least {NOISE_AFTER_TRANSIENT_S:g} s more are needed to estimate the path)")
+
+
+def check_noise_length(recording: Recording | RecordingFile, transient_s: float = TRANSIENT_S) -> None:
+    """RecordingError unless the noise recording lasts more than its transient plus
+    ``NOISE_AFTER_TRANSIENT_S``: one rule for identify, diagnose and report (a recording identify
+    accepts, the other commands accept too). A WAV file cut short is judged by what it holds."""
+    if not recording.duration > transient_s + NOISE_AFTER_TRANSIENT_S:
+        raise RecordingError(f"{recording.path}: a noise recording of {recording.duration:.3g} s is too short; it "
+                             f"needs {noise_length_rule(transient_s)}")

@@ -1,4 +1,4 @@
-"""WAV files: the header, the sample formats and their scaling to full scale; 16-bit stereo written.
+"""WAV files: the header, the sample formats and their scaling to full scale; stereo written in each format.
 
 ``read_layout`` walks a file's chunks (RIFF or RIFX, PCM or IEEE float, plain or
 WAVE_FORMAT_EXTENSIBLE) to where its frames are; ``read_frames`` reads a run of frames
@@ -6,8 +6,9 @@ as raw bytes, ``decode`` takes one channel out of them and ``full_scale`` scales
 full-scale units in [-1, 1): 16-bit PCM by 2^-15, 24/32-bit PCM (24-bit left-justified
 in 32 bits, as scipy.io.wavfile returns it) by 2^-31, 8-bit unsigned PCM by
 (x - 128)/128, float as is. ``sysid.io.recordings`` builds its recordings on these;
-``write_wav16`` and ``write_wav16_blocks`` write what ``sysid.simulate`` and the tests
-record. A file that is no readable WAV raises RecordingError with a one-line message
+``write_wav`` writes stereo 16, 24 or 32-bit PCM or 32-bit float (``SAMPLE_FORMATS``; what
+``sysid.simulate`` records, the inverse of that scaling, so a written file reads back to the
+same samples), ``write_wav16_blocks`` 16-bit PCM from blocks. A file that is no readable WAV raises RecordingError with a one-line message
 naming it.
 """
 
@@ -23,7 +24,10 @@ import scipy.io.wavfile
 from ..core.errors import RecordingError
 
 __all__ = ["WavLayout", "read_layout", "read_frames", "decode", "full_scale", "full_scale_rails", "unreadable",
-           "write_wav16", "write_wav16_blocks"]
+           "write_wav16", "write_wav16_blocks", "write_wav", "quantise", "SAMPLE_FORMATS"]
+
+# The sample formats written: PCM of 16, 24 or 32 bits, or IEEE float of 32 bits.
+SAMPLE_FORMATS = ("16", "24", "32", "float")
 
 
 @dataclass(frozen=True)
@@ -167,6 +171,55 @@ def _pcm16(u: np.ndarray, y: np.ndarray) -> np.ndarray:
 def write_wav16(path, u: np.ndarray, y: np.ndarray, fs: float) -> None:
     """Write a stereo 16-bit PCM WAV (channel 0 = u, channel 1 = y), rounding and saturating."""
     scipy.io.wavfile.write(path, int(round(fs)), _pcm16(u, y))
+
+
+def _sample_format(bits) -> str:
+    text = str(bits)
+    if text not in SAMPLE_FORMATS:
+        raise RecordingError(f"sample format must be one of {', '.join(SAMPLE_FORMATS)} (bits of PCM, or float); "
+                             f"found {bits!r}")
+    return text
+
+
+def quantise(x: np.ndarray, bits="16") -> np.ndarray:
+    """x (full-scale units) as a file of ``bits`` holds it: PCM codes rounded and saturated at
+    [-1, 1 - 2^(1-bits)], scaled back; float rounded to float32."""
+    bits = _sample_format(bits)
+    if bits == "float":
+        return np.asarray(x, dtype=np.float32).astype(float)
+    scale = 2.0 ** (int(bits) - 1)
+    return np.clip(np.round(np.asarray(x, float) * scale), -scale, scale - 1) / scale
+
+
+def write_wav(path, u: np.ndarray, y: np.ndarray, fs: float, bits="16") -> None:
+    """Write a stereo WAV (channel 0 = u, channel 1 = y) of ``bits`` (``SAMPLE_FORMATS``): PCM rounded and
+    saturated, 24-bit packed in 3 bytes; float as IEEE float32 (with the fact chunk non-PCM formats carry)."""
+    bits = _sample_format(bits)
+    rate = int(round(fs))
+    stereo = np.stack([np.asarray(u, float), np.asarray(y, float)], axis=1)
+    if bits == "float":
+        data, tag, width = stereo.astype("<f4").tobytes(), _IEEE_FLOAT, 4
+    else:
+        width = int(bits) // 8
+        scale = 2.0 ** (int(bits) - 1)
+        codes = np.clip(np.round(stereo * scale), -scale, scale - 1).astype("<i4")
+        if width == 2:
+            data = codes.astype("<i2").tobytes()
+        elif width == 3:
+            # The three low bytes of each little-endian int32: packed 24-bit samples.
+            data = codes.view(np.uint8).reshape(-1, 4)[:, :3].tobytes()
+        else:
+            data = codes.tobytes()
+        tag = _PCM
+    frames = stereo.shape[0]
+    fmt = struct.pack("<HHIIHH", tag, 2, rate, 2 * width * rate, 2 * width, 8 * width)
+    chunks = b"fmt " + struct.pack("<I", len(fmt)) + fmt
+    if tag == _IEEE_FLOAT:
+        fmt = fmt + struct.pack("<H", 0)
+        chunks = b"fmt " + struct.pack("<I", len(fmt)) + fmt + b"fact" + struct.pack("<II", 4, frames)
+    body = chunks + b"data" + struct.pack("<I", len(data)) + data + (b"\0" if len(data) & 1 else b"")
+    with open(path, "wb") as handle:
+        handle.write(b"RIFF" + struct.pack("<I", 4 + len(body)) + b"WAVE" + body)
 
 
 def write_wav16_blocks(path, blocks, fs: float) -> int:

@@ -25,12 +25,12 @@ import numpy as np
 import scipy.fft
 
 from ..core.errors import IdentificationError
-from ..core.thresholds import SKIP_S, VALIDATION_BAND
+from ..core.thresholds import REPEAT_CORRELATION, REPEAT_FLOOR_INFLATION, SKIP_S, VALIDATION_BAND
 from ..io.lines import find_lines, fit_sinusoids, without_lines
 from ..io.recordings import Recording
 
 __all__ = ["SweepSpectrum", "sweep_spectrum", "band_energy", "rms_from_responses", "CompressedValidation",
-           "noise_floor", "repeat_lines", "without_repeat_lines", "repeat_lag", "check_repeats", "band_rms", "simulated_rms", "rfft_pair", "validation_start",
+           "noise_floor", "repeat_lines", "without_repeat_lines", "repeat_lag", "check_repeats", "repeat_check", "RepeatCheck", "excitation_seconds", "band_rms", "simulated_rms", "rfft_pair", "validation_start",
            "aligned_ears", "SKIP_S", "VALIDATION_BAND"]
 
 # ``SKIP_S`` and ``VALIDATION_BAND`` are defined in ``sysid.core.thresholds`` with the other bands, and
@@ -254,18 +254,100 @@ def noise_floor(sweep1: Recording, sweep2: Recording, band=VALIDATION_BAND, skip
     return band_rms(difference, sweep1.fs, band) / np.sqrt(2.0)
 
 
-def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, lag: int | None = None) -> None:
-    """IdentificationError when the two sweeps cannot give a noise floor: sample-identical ear signals.
+def excitation_seconds(sweep: Recording) -> float:
+    """Length (s) of a sweep recording's excitation: from the first to the last 10 ms window whose
+    input power is above a tenth of the largest window's (the silence around the sweep left out)."""
+    window = max(1, int(round(0.01 * sweep.fs)))
+    if sweep.u.size < window:
+        return sweep.u.size / sweep.fs
+    power = np.convolve(sweep.u**2, np.ones(window) / window, mode="valid")
+    above = np.flatnonzero(power > 0.1 * np.max(power))
+    return (above[-1] - above[0] + window) / sweep.fs if above.size else 0.0
 
-    The floor is the difference of two repeats (``noise_floor``); the same file given
-    twice, or a copy of it, makes that difference exactly zero, every error ratio
-    infinite and every band "above the noise floor". No other estimate of the output
-    noise exists in the sweeps, so this is an error rather than a warning.
+
+@dataclass(frozen=True)
+class RepeatCheck:
+    """How well two sweep recordings repeat one excitation (``repeat_check``).
+
+    ``correlation``: the normalised cross-correlation of their inputs at the aligning lag (1 for
+    one excitation recorded twice, less by the input channel's own noise); ``level_db``: the
+    second input's level over the first's on the samples they share after alignment (dB);
+    ``lengths_s``: each excitation's length (``excitation_seconds``); ``floor_inflation``: the
+    repeats' ear difference over that difference with the second ear scaled to the first's
+    input level (band rms ratio; 1 when the levels agree).
+    """
+
+    correlation: float
+    level_db: float
+    lengths_s: tuple[float, float]
+    floor_inflation: float
+
+    @property
+    def repeats(self) -> bool:
+        """The inputs share more than they differ, and a level difference would not make up most of the floor."""
+        return self.correlation >= REPEAT_CORRELATION and self.floor_inflation <= REPEAT_FLOOR_INFLATION
+
+
+def repeat_check(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, lag: int | None = None,
+                 band=VALIDATION_BAND) -> RepeatCheck:
+    """The figures of ``RepeatCheck`` for two sweep recordings aligned by ``lag`` (``repeat_lag`` by default)."""
+    lag = repeat_lag(sweep1, sweep2) if lag is None else lag
+    u1, u2 = (sweep1.u[lag:], sweep2.u) if lag >= 0 else (sweep1.u, sweep2.u[-lag:])
+    n = min(u1.size, u2.size)
+    energy1, energy2 = float(np.dot(sweep1.u, sweep1.u)), float(np.dot(sweep2.u, sweep2.u))
+    correlation = float(np.dot(u1[:n], u2[:n]) / np.sqrt(energy1 * energy2)) if energy1 * energy2 > 0 else 0.0
+    shared1, shared2 = float(np.dot(u1[:n], u1[:n])), float(np.dot(u2[:n], u2[:n]))
+    level_db = 10 * np.log10(shared2 / shared1) if shared1 > 0 and shared2 > 0 else float("-inf")
+    inflation = 1.0
+    y1, y2 = aligned_ears(sweep1, sweep2, skip_s, lag)
+    if y1.size >= 2 and np.isfinite(level_db):
+        # A level difference puts (1 - g) of the ear signal into the repeats' difference: the floor
+        # from it is mostly that, not noise, when scaling the second ear to the first's level
+        # lowers the difference beyond what the noise explains.
+        plain = band_rms(y1 - y2, sweep1.fs, band)
+        scaled = band_rms(y1 - 10 ** (-level_db / 20) * y2, sweep1.fs, band)
+        inflation = plain / scaled if scaled > 0 else (np.inf if plain > 0 else 1.0)
+    return RepeatCheck(correlation, float(level_db), (excitation_seconds(sweep1), excitation_seconds(sweep2)),
+                       float(inflation))
+
+
+def check_repeats(sweep1: Recording, sweep2: Recording, skip_s: float = SKIP_S, lag: int | None = None) -> RepeatCheck:
+    """IdentificationError when the two sweeps cannot give a noise floor; else their ``RepeatCheck``.
+
+    The floor is the difference of two repeats of one excitation (``noise_floor``), a shift
+    between them aligned (``repeat_lag``). Refused, because no other estimate of the output
+    noise exists in the sweeps and a floor from anything else is meaningless (a model whose
+    order search stopped on it is written with a wrong verdict):
+
+    * sample-identical ear signals (the same file given twice, or a copy): the difference is
+      exactly zero, every error ratio infinite;
+    * inputs that are not one excitation (sweeps of different lengths or kinds): aligned at
+      their best lag they correlate less than ``REPEAT_CORRELATION`` (two log sweeps of 2.0 and
+      2.05 s: -0.30; a repeat with input noise at -13 dB: 0.95);
+    * one excitation at two levels, when the level difference makes up most of the ears'
+      difference (``REPEAT_FLOOR_INFLATION``): a sweep at half level put 10x the noise into it
+      (a floor 0.01x what a model is judged against). A change of the path itself between
+      the repeats (time variation, which ``diagnose`` names) leaves the inputs alike and
+      is not refused here.
+    The message gives the level difference (dB) and the excitations' lengths (s).
     """
     y1, y2 = aligned_ears(sweep1, sweep2, skip_s, lag)
     if y1.size >= 2 and np.array_equal(y1, y2):
         raise IdentificationError(f"{sweep1.path}, {sweep2.path}: the two sweeps are sample-identical (the same "
                                   "recording twice?), so the noise floor is unknown; give two separate recordings")
+    check = repeat_check(sweep1, sweep2, skip_s, lag)
+    if not check.repeats:
+        first, second = check.lengths_s
+        if check.correlation < REPEAT_CORRELATION:
+            what = (f"their inputs are not one excitation (excitations of {first:.2f} s and {second:.2f} s, "
+                    f"correlation {check.correlation:.2f} at their best alignment, input level {check.level_db:+.1f} dB)")
+        else:
+            what = (f"the second input is {check.level_db:+.1f} dB from the first (excitations of {first:.2f} s and "
+                    f"{second:.2f} s), which puts {check.floor_inflation:.1f}x the noise into their difference")
+        raise IdentificationError(f"{sweep1.path}, {sweep2.path}: the sweeps do not repeat each other: {what}; the "
+                                  "noise floor comes from the difference of two repeats, so record the same sweep "
+                                  "twice at one level")
+    return check
 
 
 def simulated_rms(model, sweeps: list[Recording], band=VALIDATION_BAND, skip_s: float = SKIP_S) -> float:

@@ -65,8 +65,13 @@ def test_failed_session_gives_exit_1_with_the_count_and_a_resumable_folder(sessi
     assert "H1_good_fb resumed" in err and "H1_bad_fb failed" in err
 
 
-def test_all_ok_is_exit_0(sessions, tmp_path, capsys):
+def test_all_ok_is_exit_0_and_a_folder_lacking_a_file_is_listed(sessions, tmp_path, capsys):
     only_good = tmp_path / "only"
     shutil.copytree(sessions / "H1" / "good", only_good / "H1" / "good")
+    shutil.copytree(sessions / "H1" / "good", only_good / "H1" / "half")
+    (only_good / "H1" / "half" / "noise.wav").unlink()
     assert main(["batch", str(only_good), "-o", str(tmp_path / "out"), "--workers", "1", *FAST]) == 0
-    assert "1 session(s): 1 identified" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "1 session(s): 1 identified" in captured.out
+    assert "1 folder(s) skipped: H1/half lacks noise.wav" in captured.out
+    assert captured.err.splitlines()[0] == "skipped H1/half: lacks noise.wav"

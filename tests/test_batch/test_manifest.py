@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from batch.manifest import SESSION_FILES, read_sessions
+from batch.manifest import SESSION_FILES, Skipped, find_sessions, read_sessions
 from sysid.core.errors import HelmetAncError
 
 
@@ -27,10 +27,17 @@ class TestFolder:
         assert entries[0].name == "H1_rider03_loose_ff"
         assert entries[0].noise == str((tmp_path / "H1" / "rider03" / "loose" / "ff" / "noise.wav").resolve())
 
-    def test_incomplete_session_folder_is_named(self, tmp_path):
-        folder = _session(tmp_path / "H1" / "r1")
-        (folder / "sweep2.wav").unlink()
-        with pytest.raises(HelmetAncError, match=r"r1: session folder lacks sweep2.wav"):
+    def test_an_incomplete_session_folder_is_skipped_and_named_with_what_it_lacks(self, tmp_path):
+        _session(tmp_path / "H1" / "r0")
+        (_session(tmp_path / "H1" / "r1") / "sweep2.wav").unlink()
+        (_session(tmp_path / "H1" / "r2") / "noise.wav").unlink()  # found by its sweeps alone
+        entries, skipped = find_sessions(tmp_path)
+        assert [e.head for e in entries] == ["r0"]
+        assert skipped == [Skipped("H1/r1", "lacks sweep2.wav"), Skipped("H1/r2", "lacks noise.wav")]
+
+    def test_only_incomplete_folders_say_which(self, tmp_path):
+        (_session(tmp_path / "H1" / "r1") / "noise.wav").unlink()
+        with pytest.raises(HelmetAncError, match=r"no sessions found .*; skipped 1 folder\(s\): H1/r1 lacks noise.wav"):
             read_sessions(tmp_path)
 
     def test_empty_folder(self, tmp_path):

@@ -89,7 +89,7 @@ class TestBadInput:
         u = 0.1 * rng.standard_normal(3 * 44100 + 1000)
         write_wav16(tmp_path / "short.wav", u, 0.5 * u, 44100)
         code, _, err = _run(capsys, *_identify_args(dict(session_files, noise=tmp_path / "short.wav"), tmp_path / "m.json"))
-        _assert_one_line_error(code, err, "short.wav: 0.0227 s after the transient is shorter than one averaging segment")
+        _assert_one_line_error(code, err, "short.wav: a noise recording of 3.02 s is too short; it needs more than 3.8 s")
 
     def test_sample_rate_mismatch(self, session_files, tmp_path, capsys):
         fs, data = scipy.io.wavfile.read(session_files["sweep2"])

@@ -48,7 +48,8 @@ def test_demo_rerun_replaces_only_its_own_files(tmp_path, capsys):
 @pytest.mark.slow
 def test_demo_identifies_both_paths_and_verifies_their_firmware(tmp_path, capsys):
     assert main(["demo", str(tmp_path / "demo")]) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     for path in ("fb", "ff"):
         model = Model.load(tmp_path / "demo" / f"{path}_model.json")
         assert model.stable
@@ -56,3 +57,19 @@ def test_demo_identifies_both_paths_and_verifies_their_firmware(tmp_path, capsys
         manifest = json.loads((tmp_path / "demo" / "firmware" / path / "manifest.json").read_text())
         assert all(row["q15"]["max_lsb_difference"] == 0 for row in manifest["verification"]["sweeps"])
     assert "0 LSB" in out
+    steps = [line for line in captured.err.splitlines() if line.startswith("demo [")]
+    assert [line.split("]")[0] for line in steps] == [f"demo [{k}/6" for k in range(1, 7)]
+
+
+@pytest.mark.parametrize("report, firmware, total", [(True, True, 6), (False, True, 5), (True, False, 4),
+                                                      (False, False, 3)])
+def test_the_step_lines_count_the_steps_that_run(report, firmware, total, capsys):
+    from helmet_anc.commands.demo import _Steps, step_count
+
+    assert step_count(report, firmware) == total
+    say = _Steps(quiet=False, total=total)
+    for k in range(total):
+        say(f"step {k}")
+    lines = capsys.readouterr().err.splitlines()
+    assert [line.split("]")[0] for line in lines] == [f"demo [{k}/{total}" for k in range(1, total + 1)]
+    assert all(line.endswith(" s)") for line in lines)

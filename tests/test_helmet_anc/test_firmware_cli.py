@@ -164,6 +164,25 @@ class TestVerifyWithRecordings:
         assert all(r["samples"] == int(0.15 * 44100) and r["q15"]["max_lsb_difference"] == 0 for r in rows)
         assert "sweep1.wav" in out and "0 LSB" in out
 
+    def test_the_snr_table_predicts_what_it_measures_and_says_against_what(self, model_file, tmp_path, capsys,
+                                                                          sweep_files):
+        """The measured SNR on a sweep stands beside a prediction of that same quantity for the Q15 variant (its
+        absolute round-off noise at the sweep's output power: within 2 dB), none for float32 (relative round-off);
+        the full-scale-sine figure (what --min-snr judges) is a column of its own."""
+        status, out, err = _run([model_file, "-o", tmp_path / "out", "--verify", "--sweep", sweep_files[0],
+                                 "--sweep", sweep_files[1]], capsys)
+        assert status == 0, err
+        manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
+        for row in manifest["verification"]["sweeps"]:
+            q15, single = row["q15"], row["float"]
+            assert abs(q15["snr_vs_float64_db"] - q15["predicted_snr_db"]) < 2.0, q15
+            assert "predicted_snr_db" not in single
+            assert q15["predicted_snr_db"] < manifest["predicted"]["q15"]["snr_db"] - 3.0  # a sweep is quieter
+        header = next(line for line in out.splitlines() if line.startswith("sweep "))
+        assert header.split() == ["sweep", "variant", "samples", "vs", "reference", "SNR", "on", "sweep", "predicted",
+                                  "full-scale", "sine"]
+        assert "against the float64 model on the same input" in out and "which --min-snr judges" in out
+
     def test_sweep_at_other_rate_refused(self, model_file, tmp_path, capsys, sweep_files):
         status, _, err = _run([model_file, "-o", tmp_path / "out", "--fs", "48000", "--verify",
                                "--sweep", sweep_files[0]], capsys)

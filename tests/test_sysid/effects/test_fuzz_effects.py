@@ -36,7 +36,7 @@ def test_effect_parsers_return_or_raise_one_line(text):
 
 def _run_simulate(text, folder, capsys):
     target = folder / "session"
-    code = main(["simulate", str(target), "--noise-seconds", "3.5", "--sweep-seconds", "0.2", "--effect", text])
+    code = main(["simulate", str(target), "--noise-seconds", "4", "--sweep-seconds", "0.2", "--effect", text])
     _, err = capsys.readouterr()
     if code == 0:
         assert (target / "truth.json").is_file()

@@ -3,11 +3,15 @@
 import numpy as np
 import pytest
 import scipy.io.wavfile
+from conftest import FAST_OPTIONS
 
 from sysid.core.errors import RecordingError
 from sysid.core.thresholds import EAR_COHERENCE_STRETCH, UNCORRELATED_COHERENCE
 from sysid.io.ear_channel import check_ear_channel, ear_coherence
+from sysid.core.model import Model
+from sysid.identify import identify
 from sysid.io.recordings import Recording, open_recording, write_wav16
+from sysid.random_plant import _continuous_statespace, _zoh_modal
 from sysid.simulate import SessionSpec, simulate_session, write_session
 
 
@@ -50,3 +54,47 @@ def test_an_ear_hearing_only_noise_is_refused_whatever_the_stretch(tmp_path):
     scipy.io.wavfile.write(path, 44100, x)
     with pytest.raises(RecordingError, match="does not follow input channel"):
         open_recording(path)
+
+
+# Paths that roll off: below the sensor noise above 1-2 kHz, as a helmet shell makes every feed-forward path.
+# A modal sum as sysid.random_plant draws them (its continuous realisation, each mode sampled by ZOH), behind a
+# fourth-order roll-off at 1.0-1.3 kHz. Judged by the median coherence over 100 Hz-4 kHz these read 0.06-0.18
+# and were refused as disconnected ears, their coherence being 0.94-0.99 from 20 Hz to 1 kHz.
+ROLLED_OFF = {
+    "fb": [(52.0, 4.7, 1.0)],
+    "ff": [(101.0, 26.0, -0.83), (538.0, 3.8, -0.45), (552.0, 6.5, 0.63)],
+}
+ROLL_OFF_HZ = (1000.0, 1100.0, 1200.0, 1300.0)
+
+
+def rolled_off_plant(path: str, fs: float = 44100.0):
+    A, B, C, D = _zoh_modal(*_continuous_statespace(ROLLED_OFF[path], ROLL_OFF_HZ, None), fs)
+    return Model(path=path, fs=fs, A=A, B=B, C=C, D=D)
+
+
+def rolled_off_session(path: str):
+    spec = SessionSpec(path=path, seed=1, output_noise=3e-4, noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
+    return simulate_session(spec, plant=rolled_off_plant(path))
+
+
+@pytest.mark.parametrize("path", ["fb", "ff"])
+def test_a_path_that_rolls_off_is_heard_and_identified_at_the_floor(path, tmp_path):
+    files = write_session(rolled_off_session(path), tmp_path / path)
+    noise = open_recording(files["noise"])
+    sweeps = [open_recording(files[key]).load() for key in ("sweep1", "sweep2")]
+    assert ear_coherence(noise) > 5 * UNCORRELATED_COHERENCE
+    result = identify(noise, sweeps, path, FAST_OPTIONS)
+    assert result.model.identification["rms"] < 1.1 * result.noise_floor
+
+
+@pytest.mark.parametrize("path", ["fb", "ff"])
+def test_an_ear_hearing_noise_shaped_like_the_path_but_unrelated_to_its_input_is_refused(path, tmp_path):
+    """The ear's spectrum alone tells nothing: the same path's response to another noise is refused."""
+    session = rolled_off_session(path)
+    other = simulate_session(SessionSpec(path=path, seed=2, output_noise=3e-4, noise_duration=8.0),
+                             plant=rolled_off_plant(path))
+    write_wav16(tmp_path / "unrelated.wav", session.noise.u, other.noise.y, 44100)
+    with pytest.raises(RecordingError, match=r"unrelated.wav: ear channel 1 does not follow input channel 0 \(\d % of "
+                                             r"its power in 20-4000 Hz is coherent with the input\); check the "
+                                             "microphone"):
+        open_recording(tmp_path / "unrelated.wav")
