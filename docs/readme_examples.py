@@ -214,10 +214,33 @@ def normalise(text: str) -> list[str]:
     return lines
 
 
+# A printed figure is a measurement: a fit's last digits move with the machine's round-off (BLAS, the order of
+# a sum), so decimal figures agree within FIGURE_TOLERANCE of each other (relative) or one unit of their last
+# printed digit, whichever is larger; integers (orders, delays, counts) and every word must agree exactly.
+FIGURE_TOLERANCE = 0.05
+_FIGURE = re.compile(r"[-+]?\d+\.\d+(?:[eE][-+]?\d+)?")
+
+
+def _same_line(shown: str, printed: str) -> bool:
+    """The lines agree: the same text with every decimal figure replaced, and each pair of figures within
+    FIGURE_TOLERANCE (relative) or one unit of the README's last printed digit."""
+    if _FIGURE.sub("#", shown) != _FIGURE.sub("#", printed):
+        return False
+    for a, b in zip(_FIGURE.findall(shown), _FIGURE.findall(printed)):
+        mantissa = a.lower().split("e")[0]
+        unit = 10.0 ** -len(mantissa.split(".")[1]) * (10.0 ** int(a.lower().split("e")[1]) if "e" in a.lower()
+                                                       else 1.0)
+        x, y = float(a), float(b)
+        if abs(x - y) > max(FIGURE_TOLERANCE * max(abs(x), abs(y)), unit * (1 + 1e-9)):
+            return False
+    return True
+
+
 def differences(expected: str, printed: str) -> list[str]:
-    """Line-by-line differences (README line vs printed line), empty when they agree."""
+    """Line-by-line differences (README line vs printed line), empty when they agree (``_same_line``)."""
     shown, got = normalise(expected), normalise(printed)
-    found = [f"line {k + 1}:\n  README : {a}\n  printed: {b}" for k, (a, b) in enumerate(zip(shown, got)) if a != b]
+    found = [f"line {k + 1}:\n  README : {a}\n  printed: {b}" for k, (a, b) in enumerate(zip(shown, got))
+             if not _same_line(a, b)]
     if len(shown) != len(got):
         found.append(f"the README shows {len(shown)} lines, the example printed {len(got)}")
     return found
