@@ -12,6 +12,11 @@ validation error worse is flagged (``step["worse"]``) and, in ``refine_auto``, r
 ``refine_auto`` repeats diagnose -> add the top significant finding -> refit,
 monotone and bounded (see its docstring); the data corrections it finds pending
 are applied together, then one re-identification (``refine_corrections``).
+
+Both hold the model to a state cap (``max_order``: what the board can afford; by default the
+cap the model was identified under, ``identification["max_order"]``, if any): a step that adds
+states (``states``, the order after it, or ``extra_order``) is cut to the cap, and ``refine_auto``
+stops at the cap saying how far from the floor the model is and what more states would buy.
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
+
+import numpy as np
 
 from . import effects as registry
 from . import refits
@@ -29,13 +36,14 @@ from .core.thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT
 from .diagnose import diagnose
 from .findings.context import detector_context
 from .findings.input_noise import bound_ratio
+from .findings.tail import ladder_text
 from .identify import IdentificationOptions
 from .io.recordings import Recording
 from .refits import REFIT_OPTIONS
 from .validation.compare import Comparison, compare
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
-           "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement"]
+           "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement", "state_cap"]
 
 
 class _RegistryView(Mapping):
@@ -131,16 +139,52 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
     return params
 
 
+def state_cap(model: Model, max_order: int | None = None) -> int | None:
+    """The state cap refinement holds to: ``max_order`` if given, else the model's own
+    (``identification["max_order"]``, the cap it was identified under), else None (no cap)."""
+    cap = max_order if max_order is not None else model.identification.get("max_order")
+    if cap is None:
+        return None
+    if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
+        raise IdentificationError(f"--max-order must be a whole number of states of at least 1; found {cap!r}")
+    return int(cap)
+
+
+def _held_to_cap(kind: str, params: dict, model: Model, cap: int | None) -> dict:
+    """``params`` with the states they add cut to ``cap``: ``states`` (the order after the step) or
+    ``extra_order`` (states added); IdentificationError when the model is at the cap already."""
+    if cap is None or not ({"states", "extra_order"} & set(params)):
+        return params
+    room = cap - model.order
+    if room <= 0:
+        raise IdentificationError(f"--add {kind}: the model holds {model.order} states, at the state cap of {cap} "
+                                  f"(--max-order)")
+    params = dict(params)
+    if params.get("states") is not None:
+        params["states"] = min(int(params["states"]), cap)
+    if params.get("extra_order") is not None:
+        params["extra_order"] = min(int(params["extra_order"]), room)
+    return params
+
+
 def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
-           transient_s: float = TRANSIENT_S, before: Comparison | None = None) -> Refinement:
-    """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify."""
+           transient_s: float = TRANSIENT_S, before: Comparison | None = None, max_order: int | None = None) -> Refinement:
+    """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify, holding the model to
+    the state cap (``state_cap``)."""
     spec = effect if isinstance(effect, EffectSpec) else parse_refinement(effect)
     if spec.kind not in REFINE_EFFECTS:
         raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
+    cap = state_cap(model, max_order)
     before = before or compare(model, sweeps)
-    params = _complete(spec, model, noise, sweeps, before, transient_s)
+    params = _held_to_cap(spec.kind, _complete(spec, model, noise, sweeps, before, transient_s), model, cap)
     effect = registry.get(spec.kind)
     refined, extra = effect.build(model, noise, sweeps, params, options, transient_s)
+    if cap is not None and refined.order > max(cap, model.order):
+        raise IdentificationError(f"refining with {spec.kind} gave {refined.order} states, above the state cap of "
+                                  f"{cap} (--max-order); the model is left unchanged")
+    if max_order is not None:
+        # The cap the user set is the model's from now on (``state_cap``'s default for the next refinement).
+        refined.identification["max_order"] = cap
     if refined.clock_ratio != 1.0 and effect.correct is None and refined.stable:
         # The clock ratio was read against a model that lacked this structure, whose misfit (harmonics,
         # say) biased the reading: read again against the refined model, kept only if it pays.
@@ -255,7 +299,8 @@ def _allowed(effect: str, rejected: dict[str, int], retried: set[str], accepted:
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
-                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S) -> AutoRefinement:
+                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S,
+                max_order: int | None = None) -> AutoRefinement:
     """Diagnose -> add the top significant structure or correction -> refit, monotone and bounded.
 
     A step is kept only if it lowers the validation rms by more than the run-to-run
@@ -267,8 +312,11 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     stretches, output offset: effects with a ``correct``) are applied together before one
     re-identification (``refine_corrections``), one step naming each; kept when it passes
     the rule of any of them, and tried one at a time if not. ``stop_reason`` says why it stopped: "at the floor",
-    "nothing left that lowers the error", "effects that cannot be modelled: ...".
+    "nothing left that lowers the error", "effects that cannot be modelled: ...", "at the state cap ..." (what
+    more states would buy). The state cap: ``max_order``, or the model's own (``state_cap``); a step that adds
+    states is cut to it.
     """
+    cap = state_cap(model, max_order)
     start = current = compare(model, sweeps)
     steps: list[RefinementStep] = []
     rejected: dict[str, int] = {}  # effect -> accepted steps before it was rejected
@@ -304,15 +352,18 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
                                        if unmodellable else "")
                 break
         candidates.sort(key=lambda f: f["effect"] not in corrections)
-        specs = [(f, _auto_spec(f)) for f in candidates]
+        specs, capped = _within_cap([(f, _auto_spec(f)) for f in candidates], model, cap)
         specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
         if not specs and not at_floor and _allowed("under-modelled", rejected, retried, accepted):
             # Everything named was tried and the error is still above the floor: more order is what is
             # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
             fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
-            specs = [(fallback, spec) for spec in [_auto_spec(fallback)] if _step_key([spec], model) not in tried]
+            more, held = _within_cap([(fallback, _auto_spec(fallback))], model, cap)
+            capped = capped or held
+            specs = [(f, spec) for f, spec in more if _step_key([spec], model) not in tried]
         if not specs:
-            stop_reason = ("effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
+            stop_reason = (_at_cap(cap, model, current, diagnosis) if capped else
+                           "effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
                            else "nothing left that lowers the error")
             break
         # Every pending data correction (clock ratio, clipped stretches, offset) in one step before one
@@ -329,7 +380,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         needed = max(current.run_to_run, RUN_TO_RUN_MIN * current.rms)
         try:
             result = (refine_corrections(model, noise, sweeps, chosen, options, transient_s, current) if combined
-                      else refine(model, noise, sweeps, chosen[0], options, transient_s, current))
+                      else refine(model, noise, sweeps, chosen[0], options, transient_s, current, max_order=cap))
         except HelmetAncError as exc:
             # An unstable or failed refit is reported as a rejected step, never returned.
             params = {k: v for s in chosen for k, v in s.params.items()}
@@ -362,6 +413,33 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         if current.ratio <= AT_FLOOR:
             stop_reason = "at the floor"
     return AutoRefinement(model, steps, stop_reason, start, current)
+
+
+def _within_cap(specs: list, model: Model, cap: int | None) -> tuple[list, bool]:
+    """(the steps with the states they add cut to the state cap, whether a step was cut or left out at it)."""
+    kept, capped = [], False
+    for f, spec in specs:
+        try:
+            held = _held_to_cap(spec.kind, spec.params, model, cap)
+        except IdentificationError:
+            capped = True
+            continue
+        capped = capped or held != spec.params
+        kept.append((f, EffectSpec(spec.kind, held)))
+    return kept, capped
+
+
+def _at_cap(cap: int, model: Model, current: Comparison, diagnosis) -> str:
+    """Why ``refine_auto`` stopped at the state cap: how far from the floor, and what more states would buy (the
+    reverberant tail's truncation ladder, when diagnose read one)."""
+    text = f"at the state cap ({cap} states, --max-order): the validation error is {current.ratio:.2f}x the noise floor"
+    tail = next((f for f in diagnosis if f.effect == "reverberant-tail" and f.params.get("ladder")), None)
+    if tail is None:
+        return text + f"; more states might lower it (refine --auto --max-order {model.order + 2} or more)"
+    more = ladder_text(tail.params["ladder"], model.order, tail.params["states"])
+    reach = "reaches the floor at about" if tail.params.get("states_reach_floor") else "needs more than"
+    return (text + f"; the reverberant tail {reach} {tail.params['states']} states (the long estimate truncated: "
+            f"{more}): refine --auto --max-order {tail.params['states']}")
 
 
 def bounding_findings(diagnosis) -> list:

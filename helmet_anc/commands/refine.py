@@ -22,6 +22,8 @@ def register(commands) -> None:
     parser.add_argument("--add", action="append", default=[], metavar="EFFECT[:PARAMS]",
                         help="structure to add, repeatable: " + ", ".join(REFINE_EFFECTS) + " (e.g. delay:23)")
     parser.add_argument("--auto", action="store_true", help="diagnose, add the top finding, refit, until done")
+    parser.add_argument("--max-order", type=int, metavar="N",
+                        help="state cap: the refined model holds at most N states (default: the model's own cap)")
     parser.add_argument("--report", metavar="PATH", help="also write the HTML report of the refined model (file or folder)")
     parser.add_argument("-o", "--output", required=True, metavar="NEW.json")
     add_force_option(parser)
@@ -31,6 +33,8 @@ def register(commands) -> None:
 def run(args) -> int:
     if bool(args.add) == bool(args.auto):
         raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
+    if args.max_order is not None and args.max_order < 1:
+        raise HelmetAncError(f"--max-order must be at least 1 state; found {args.max_order}")
     specs = [parse_refinement(text) for text in args.add]
     output = check_output(args.output, args)
     report_target = check_report_target(args.report, args)
@@ -40,13 +44,13 @@ def run(args) -> int:
     stop_reason = None
     if args.auto:
         with busy("refine --auto: diagnose, add, refit", args.quiet):
-            auto = refine_auto(model, noise, sweeps)
+            auto = refine_auto(model, noise, sweeps, max_order=args.max_order)
         model, steps, stop_reason = auto.model, auto.steps, auto.stop_reason
     else:
         steps = []
         for spec in specs:
             with busy(f"refine: adding {spec.kind}", args.quiet):
-                result = refine(model, noise, sweeps, spec)
+                result = refine(model, noise, sweeps, spec, max_order=args.max_order)
             steps.append(result.step)
             model = result.model
             if result.step.worse:

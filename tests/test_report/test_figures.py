@@ -212,6 +212,7 @@ class TestDiagnosisFigures:
         _finding("highpass", corner_hz=60.0, order=1),
         _finding("lowpass", corner_hz=2500.0, order=2),
         _finding("under-modelled", order=5, worst_band_hz=800.0),
+        _finding("reverberant-tail", length_ms=30.0, states=40, start_ms=2.0),
     ], ids=lambda f: f["effect"])
     def test_each_effect_gets_a_plot(self, ff, finding):
         session, result, comparison = ff
@@ -274,7 +275,7 @@ class TestDiagnosisFigures:
                  "nonlinearity_finding": "input-nonlinearity", "disturbance_finding": "periodic-disturbance",
                  "input_noise_finding": "input-noise", "clock_drift_finding": "clock-drift",
                  "time_variation_finding": "time-variation", "dynamics_findings": ("resonance", "highpass", "lowpass"),
-                 "under_modelled_finding": "under-modelled"}
+                 "tail_finding": "reverberant-tail", "under_modelled_finding": "under-modelled"}
         effects = set()
         for detector in DETECTORS:
             named = names[detector.__name__]
