@@ -10,8 +10,8 @@ What the detector reads (the shared value ``long-response``, computed once per d
 
 1. The noise recording's impulse response behind the model's delay and input polynomial: the
    least-squares FIR (``sysid.estimation.long_response.fir_estimate``), ``TAIL_FIRST_S`` long,
-   doubled while the response is still above its noise in the estimate's last quarter, up to
-   ``TAIL_LONGEST_S``; the model's own impulse response beside it.
+   doubled (at most ``TAIL_DOUBLINGS`` times) while the response is still above its noise in the
+   estimate's last quarter; the model's own impulse response beside it.
 2. Their band-limited power envelopes (``band_envelope``): the taps through a Kaiser low-pass from
    the validation band's top to the identification band's (the taps above it are the input
    roll-off's amplified noise), squared and averaged over ``TAIL_ENVELOPE_S``. The noise's
@@ -26,7 +26,8 @@ What the detector reads (the shared value ``long-response``, computed once per d
 5. The states it needs (``truncation_ladder``): the FIR's frequency-limited balanced truncation
    (Gawronski & Juang 1990, ``frequency_limited_truncation``) at orders doubling from the model's,
    each validated on the sweeps, then bisected to the lowest order at the floor (``AT_FLOOR``, or
-   just above the FIR's own validation error when the estimate cannot get there). Output error
+   just above the FIR's own validation error when the estimate cannot get there, or just above
+   the error where twice and four times the states buy next to nothing: the states that pay). Output error
    beats truncation at equal order, so this is what the data need at most, and the ladder tells
    what more states would buy.
 
@@ -47,10 +48,10 @@ import scipy.linalg
 import scipy.signal
 
 from ..core import lti
-from ..core.model import MAX_ORDER
-from ..core.thresholds import (AT_FLOOR, EXCESS, EXPLAINS_GAIN, FACTOR_SHARE, IDENTIFICATION_BAND, TAIL_ABOVE_NOISE_DB,
-                               TAIL_DIRECT_DB, TAIL_ENVELOPE_S, TAIL_FIRST_S, TAIL_LADDER_SLACK, TAIL_LONGEST_S,
-                               TAIL_MIN_EXTRA_STATES, TAIL_STATES_RATIO, VALIDATION_BAND)
+from ..core.model import MAX_ORDER, Model
+from ..core.thresholds import (AT_FLOOR, EXCESS, EXPLAINS_GAIN, FACTOR_SHARE, IDENTIFICATION_BAND, NEGLIGIBLE_HSV,
+                               TAIL_ABOVE_NOISE_DB, TAIL_DIRECT_DB, TAIL_ENVELOPE_S, TAIL_DOUBLINGS, TAIL_FIRST_S,
+                               TAIL_LADDER_SLACK, TAIL_MIN_EXTRA_STATES, TAIL_STATES_RATIO, VALIDATION_BAND)
 from ..estimation.long_response import FirEstimate, fir_estimate, frequency_limited_truncation
 from ..io.recordings import Recording
 from ..validation.sweeps import CompressedValidation, SweepSpectrum, rms_from_responses, sweep_spectrum
@@ -62,8 +63,10 @@ __all__ = ["LongResponse", "TruncationLadder", "band_envelope", "noise_rms", "le
 NO_IN_BAND_ERROR = ("dc-offset", "time-variation")
 # The envelope's low-pass: flat to the validation band's top, TAIL_STOPBAND_DB down from the identification band's.
 TAIL_STOPBAND_DB = 120.0
-# Compressed validation cells (Hz) of the ladder's orders; the order it settles on is validated exactly.
+# Compressed validation cells (Hz) of the ladder's orders; the bisection ends within LADDER_RESOLUTION of the
+# lowest order at the target (about 330 states or 340 tell the user the same; each order costs a realisation).
 LADDER_CELL_HZ = 2.0
+LADDER_RESOLUTION = 0.05
 
 
 def _kernel(fs: float) -> np.ndarray:
@@ -153,19 +156,17 @@ def long_response(model, noise: Recording, transient_s: float) -> LongResponse:
     fs = noise.fs
     v, y = _core_input(model, noise.u), noise.y - model.output_offset
     start = int(round(transient_s * fs))
-    longest = int(round(TAIL_LONGEST_S * fs))
-    length = min(int(round(TAIL_FIRST_S * fs)), longest)
-    while True:
+    length = int(round(TAIL_FIRST_S * fs))
+    for doubling in range(TAIL_DOUBLINGS + 1):
         estimate = fir_estimate(v, y, fs, length, start)
         noise_level = noise_rms(estimate)
         envelope = band_envelope(estimate.taps, fs)
         above = length_above_noise(envelope, noise_level, fs)
         # Doubled while the response still rings in the estimate's last quarter and the data hold a longer one.
         complete = above < 0.75 * length / fs
-        wider = min(2 * length, longest)
-        if complete or wider == length or y.size - start < 4 * wider or start < 2 * wider - 1:
+        if complete or doubling == TAIL_DOUBLINGS or y.size - start < 8 * length or start < 4 * length - 1:
             break
-        length = wider
+        length *= 2
     impulse = np.zeros(length)
     impulse[0] = 1.0
     model_taps = lti.simulate(model.A, model.B, model.C, model.D, impulse)
@@ -236,13 +237,19 @@ class TruncationLadder:
 
 
 def truncation_ladder(taps: np.ndarray, fs: float, delay: int, spectra: list[SweepSpectrum], floor: float,
-                      model=None, start: int = 2, cap: int | None = None) -> TruncationLadder:
+                      model=None, start: int = 2, cap: int | None = None, lowest: int = 1) -> TruncationLadder:
     """The frequency-limited truncations of the FIR ``taps`` (behind ``delay`` samples) at orders doubling from
-    ``start``, validated on ``spectra`` (``tail_spectra``) against the noise ``floor`` (FS), then bisected to the
-    lowest order within ``target``: ``AT_FLOOR``, or ``TAIL_LADDER_SLACK`` times the FIR's own ratio when the FIR
-    is above it. Orders up to ``cap`` (and the model format's ``MAX_ORDER``)."""
+    ``start``, validated on ``spectra`` (``tail_spectra``) against the noise ``floor`` (FS), then bisected (to
+    ``LADDER_RESOLUTION``, not below ``lowest``) to the lowest order within ``target``: ``AT_FLOOR``, or
+    ``TAIL_LADDER_SLACK`` times the FIR's own ratio when the FIR is above it, or times the ratio of an order whose
+    double and quadruple lower it by less than ``TAIL_LADDER_SLACK`` (a plateau). Orders up to ``cap``, the model format's
+    ``MAX_ORDER`` and the last Hankel singular value above ``NEGLIGIBLE_HSV`` of the first; ``model``: the model
+    whose ratio is reckoned the same way (``model_ratio``)."""
     truncation = frequency_limited_truncation(taps, fs, (0.0, IDENTIFICATION_BAND[1]))
-    top = min(truncation.max_order, MAX_ORDER, cap or MAX_ORDER)
+    # States of negligible Hankel singular value hold nothing, and realising them is ill-conditioned.
+    hsv = truncation.hankel_singular_values
+    held = int(np.count_nonzero(hsv >= NEGLIGIBLE_HSV * hsv[0]))
+    top = max(1, min(held, MAX_ORDER, cap or MAX_ORDER))
     compressed = CompressedValidation(spectra, LADDER_CELL_HZ)
     cells = compressed.frequencies
     shift = np.exp(-2j * np.pi * cells * delay / fs)
@@ -264,12 +271,19 @@ def truncation_ladder(taps: np.ndarray, fs: float, delay: int, spectra: list[Swe
 
     n = max(1, min(start, top))
     while score(n) > target and n < top:
-        n = min(2 * n, top)
+        wider = min(2 * n, top)
+        if score(n) < TAIL_LADDER_SLACK * min(score(wider), score(min(4 * n, top))):
+            # Twice and four times the states buy next to nothing (a truncation's error is not monotone in its
+            # order: one doubling may not pay where the next does): what is left is not for more states to take
+            # (a plateau, say a slow component the truncation ranks last), and the states that pay are these.
+            target = TAIL_LADDER_SLACK * score(n)
+            break
+        n = wider
     passing = [k for k, r in scores.items() if r <= target]
     if passing:
         high = min(passing)
-        low = max([k for k in scores if k < high], default=0)
-        while high - low > 1:
+        low = max([k for k in scores if k < high], default=max(lowest, 1) - 1)
+        while high - low > max(1.0, LADDER_RESOLUTION * high):
             middle = (low + high) // 2
             low, high = (low, middle) if score(middle) <= target else (middle, high)
     orders = sorted(scores)
@@ -312,7 +326,7 @@ def ladder_text(table: list, order: int, needed: int | None = None) -> str:
     for n, ratio in table:
         if n > order and (n >= 2 * last or n == needed):
             shown.append(f"{n} states {ratio:.2f}x")
-            last = n
+            last = n if n >= 2 * last else last
     return ", ".join(shown)
 
 
@@ -336,14 +350,28 @@ def tail_finding(ctx: DiagnosisContext):
     spectra = tail_spectra(model, ctx.sweeps, ctx.comparison)
     ladder = truncation_ladder(response.taps, fs, model.delay, spectra, ctx.comparison.noise_floor, model,
                                start=max(model.order, 2))
+    missing = ctx.finding("delay")
+    if missing is not None and missing["significant"]:
+        # A missing delay costs the truncation states of its own: the response is estimated again behind it, and
+        # judged there unless that loses what the data hold before it (a measured response's slow onset: the
+        # estimate behind the delay validates worse).
+        later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D,
+                      delay=model.delay + int(missing["params"]["samples"]), input_nonlinearity=model.input_nonlinearity,
+                      output_offset=model.output_offset)
+        behind = truncation_ladder(long_response(later, ctx.noise, ctx.transient_s).taps, fs, later.delay, spectra,
+                                   ctx.comparison.noise_floor, model, start=max(model.order, 2))
+        if behind.fir_ratio <= TAIL_LADDER_SLACK * ladder.fir_ratio:
+            ladder = behind
     chosen = ladder.needed if ladder.needed is not None else ladder.best
     gain = ladder.model_ratio / ladder.ratio(chosen) if ladder.ratio(chosen) > 0 else 0.0
     # The share of the error power above the floor that the states remove (as a series factor's, FACTOR_SHARE):
     # a response longer than the estimate, or an error that is no tail, leaves most of it.
     share = (1.0 - (ladder.ratio(chosen) ** 2 - 1.0) / (ladder.model_ratio ** 2 - 1.0)
              if ladder.model_ratio > 1.0 else 0.0)
-    dense = chosen >= TAIL_STATES_RATIO * model.order and chosen >= model.order + TAIL_MIN_EXTRA_STATES
-    significant = gain >= EXPLAINS_GAIN and share >= FACTOR_SHARE and dense
+    density = chosen / max(TAIL_STATES_RATIO * model.order, model.order + TAIL_MIN_EXTRA_STATES)
+    significant = gain >= EXPLAINS_GAIN and share >= FACTOR_SHARE and density >= 1.0
+    # Ranked by how much better the states validate; short of significance, by the condition that fails most.
+    score = gain / EXPLAINS_GAIN if significant else min(gain / EXPLAINS_GAIN, share / FACTOR_SHARE, density)
     shape = _tail_shape(response)
     length_ms = 1e3 * response.length_s
     params = {"length_ms": length_ms, "length_complete": response.complete, "order": model.order, "max_order": cap,
@@ -362,8 +390,8 @@ def tail_finding(ctx: DiagnosisContext):
     if params["states_reach_floor"]:
         words.append(f"{held}, the tail needs about {chosen}: the long estimate truncated there {there}")
     else:
-        words.append(f"{held}; the long estimate truncated to {chosen} states {there} (the estimate itself "
-                     f"{ladder.fir_ratio:.2f}x: the floor needs more than it holds)")
+        words.append(f"{held}; the long estimate truncated to {chosen} states {there}, and more states buy little "
+                     f"(the estimate itself {ladder.fir_ratio:.2f}x)")
     words.append(f" (more states: {ladder_text(ladder.table(), model.order, chosen)})")
     explanation = "".join(words)
     if not significant:
@@ -372,6 +400,6 @@ def tail_finding(ctx: DiagnosisContext):
                   f"{chosen} states are not many more than the model's {model.order} (one missing mode is under-modelled)")
         explanation = f"not significant: the long estimate truncated to the states the response needs {reason}; " + explanation
     remedy = f"refine --add reverberant-tail:states={chosen}" if significant else "none"
-    return finding("reverberant-tail", significant, gain / EXPLAINS_GAIN, params, explanation, remedy,
+    return finding("reverberant-tail", significant, score, params, explanation, remedy,
                    {"rms_gain": gain, "error_share": share, "noise_rms": response.noise, "fir_taps": response.taps.size,
                     "fir_ratio": ladder.fir_ratio, "target_ratio": ladder.target})

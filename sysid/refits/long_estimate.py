@@ -55,7 +55,9 @@ def add_tail(model: Model, noise, sweeps, params, options, transient_s):
     response = long_response(bare, recordings[0], transient_s)
     floor = compare(model, sweeps).noise_floor
     spectra = [sweep_spectrum(r) for r in recordings[1:]]
-    ladder = truncation_ladder(response.taps, model.fs, 0, spectra, floor, start=model.order + 1, cap=states)
+    # From the states asked down to the lowest that reaches the floor (the detector's ladder ran upwards).
+    ladder = truncation_ladder(response.taps, model.fs, 0, spectra, floor, start=states, cap=states,
+                               lowest=model.order + 1)
     order = ladder.needed if ladder.needed is not None else ladder.best
     system, reflected = ladder.truncation.realisation(order)
     truncated = _with(model, lti.balanced_realisation(*system))
