@@ -284,8 +284,9 @@ VARIATION_CHANGE_T = 6.0
 # noise holds about 10 degrees of freedom: 6 dB is out of its reach); the tail starts once the direct sound
 # has fallen TAIL_DIRECT_DB below the peak. The ladder's target is AT_FLOOR, or TAIL_LADDER_SLACK times
 # the FIR's own ratio when the estimate cannot get there. The tail is the finding when the states it needs
-# are TAIL_STATES_RATIO times the model's and TAIL_MIN_EXTRA_STATES more: dense modes, not one missing mode
-# (under-modelled) nor a missing factor of one or two states.
+# are TAIL_STATES_RATIO times the model's (counted as the truncation's order that validates as well as the
+# model) and TAIL_MIN_EXTRA_STATES more: dense modes, not a few missing modes (under-modelled) nor a missing
+# factor of one or two states.
 TAIL_FIRST_S = 0.025
 TAIL_DOUBLINGS = 1
 TAIL_ENVELOPE_S = 0.001

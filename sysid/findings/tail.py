@@ -34,8 +34,10 @@ What the detector reads (the shared value ``long-response``, computed once per d
 The tail is the finding when it explains the error: the truncation at the order it needs
 validates ``EXPLAINS_GAIN`` better than the model and removes ``FACTOR_SHARE`` of the error power
 above the floor (as a series factor must), that order is ``TAIL_STATES_RATIO`` times the model's
-and ``TAIL_MIN_EXTRA_STATES`` more (dense modes, not one missing mode: that is under-modelled),
-and no named effect but a delay explains the error first. ``refine`` adds it by the same ladder
+and ``TAIL_MIN_EXTRA_STATES`` more (dense modes, not a few missing ones: that is under-modelled),
+the model's order counted as the truncation's that validates as well as it (output error holds
+a response in fewer states than truncation: a 5-state helmet path's truncation needs 15), and no
+named effect but a delay explains the error first. ``refine`` adds it by the same ladder
 on the model's corrected data (``sysid.refits.long_estimate``).
 """
 
@@ -216,7 +218,9 @@ class TruncationLadder:
 
     ``orders``/``ratios`` ascending in order; ``needed``: the lowest order within ``target`` (None when
     none is); ``best``: the order of lowest ratio; ``fir_ratio``: the FIR's own; ``model_ratio``: the model's
-    by the same reckoning (the sweeps' DFT bins); ``truncation``: every order's realisation.
+    by the same reckoning (the sweeps' DFT bins); ``model_states``: the lowest order that validates as well as
+    the model, within ``TAIL_LADDER_SLACK`` (the model's order in truncation's currency: output error holds a response in fewer states, 3x
+    fewer on a 5-state helmet path); ``truncation``: every order's realisation.
     """
 
     orders: tuple[int, ...]
@@ -226,6 +230,7 @@ class TruncationLadder:
     target: float
     fir_ratio: float
     model_ratio: float
+    model_states: int | None
     truncation: object
 
     def ratio(self, order: int) -> float:
@@ -279,18 +284,28 @@ def truncation_ladder(taps: np.ndarray, fs: float, delay: int, spectra: list[Swe
             target = TAIL_LADDER_SLACK * score(n)
             break
         n = wider
-    passing = [k for k, r in scores.items() if r <= target]
-    if passing:
-        high = min(passing)
-        low = max([k for k in scores if k < high], default=max(lowest, 1) - 1)
-        while high - low > max(1.0, LADDER_RESOLUTION * high):
-            middle = (low + high) // 2
-            low, high = (low, middle) if score(middle) <= target else (middle, high)
+    needed = _lowest_within(score, scores, target, lowest)
+    # As well as the model: within the slack of it (a truncation of the model's own order matches it, not better).
+    model_states = _lowest_within(score, scores, TAIL_LADDER_SLACK * model_ratio, 1) if model is not None else None
     orders = sorted(scores)
     ratios = [scores[k] for k in orders]
-    needed = min((k for k in orders if scores[k] <= target), default=None)
     best = orders[int(np.argmin(ratios))]
-    return TruncationLadder(tuple(orders), tuple(ratios), needed, best, target, fir_ratio, model_ratio, truncation)
+    return TruncationLadder(tuple(orders), tuple(ratios), needed, best, target, fir_ratio, model_ratio, model_states,
+                            truncation)
+
+
+def _lowest_within(score, scores: dict, target: float, lowest: int) -> int | None:
+    """The lowest order (to ``LADDER_RESOLUTION``, not below ``lowest``) whose ``score`` is within ``target``, bisected
+    down from the lowest evaluated order that is (None when none of ``scores`` is)."""
+    passing = [k for k, r in scores.items() if r <= target]
+    if not passing:
+        return None
+    high = min(passing)
+    low = max([k for k in scores if k < high], default=max(lowest, 1) - 1)
+    while high - low > max(1.0, LADDER_RESOLUTION * high):
+        middle = (low + high) // 2
+        low, high = (low, middle) if score(middle) <= target else (middle, high)
+    return min(k for k, r in scores.items() if r <= target)
 
 
 def _tail_shape(response: LongResponse) -> dict:
@@ -368,16 +383,19 @@ def tail_finding(ctx: DiagnosisContext):
     # a response longer than the estimate, or an error that is no tail, leaves most of it.
     share = (1.0 - (ladder.ratio(chosen) ** 2 - 1.0) / (ladder.model_ratio ** 2 - 1.0)
              if ladder.model_ratio > 1.0 else 0.0)
-    density = chosen / max(TAIL_STATES_RATIO * model.order, model.order + TAIL_MIN_EXTRA_STATES)
+    # Dense: many more states than the model's own order in the truncation's currency (a model validating as well
+    # as no truncation counts at its order).
+    held_states = max(model.order, ladder.model_states or 0)
+    density = chosen / max(TAIL_STATES_RATIO * held_states, held_states + TAIL_MIN_EXTRA_STATES)
     significant = gain >= EXPLAINS_GAIN and share >= FACTOR_SHARE and density >= 1.0
     # Ranked by how much better the states validate; short of significance, by the condition that fails most.
-    score = gain / EXPLAINS_GAIN if significant else min(gain / EXPLAINS_GAIN, share / FACTOR_SHARE, density)
+    score = gain / EXPLAINS_GAIN if significant else max(0.0, min(gain / EXPLAINS_GAIN, share / FACTOR_SHARE, density))
     shape = _tail_shape(response)
     length_ms = 1e3 * response.length_s
     params = {"length_ms": length_ms, "length_complete": response.complete, "order": model.order, "max_order": cap,
               "states": chosen, "states_reach_floor": ladder.needed is not None and ladder.ratio(chosen) <= AT_FLOOR, "rms_over_floor": ctx.excess,
               "rms_at_states": ladder.ratio(chosen), "ladder": ladder.table(),
-              "model_length_ms": 1e3 * response.model_length_s, **shape}
+              "model_length_ms": 1e3 * response.model_length_s, "model_states": held_states, **shape}
     at_least = "" if response.complete else "at least "
     words = [f"the response rings for {at_least}{length_ms:.0f} ms above the noise"]
     if shape:
@@ -397,7 +415,8 @@ def tail_finding(ctx: DiagnosisContext):
     if not significant:
         reason = (f"lowers the error only {gain:.2f}x" if gain < EXPLAINS_GAIN else
                   f"removes only {100 * share:.0f} % of the error power above the floor" if share < FACTOR_SHARE else
-                  f"{chosen} states are not many more than the model's {model.order} (one missing mode is under-modelled)")
+                  f"{chosen} states are not many more than the {held_states} a truncation needs to match the model "
+                  f"(a few missing modes are under-modelled)")
         explanation = f"not significant: the long estimate truncated to the states the response needs {reason}; " + explanation
     remedy = f"refine --add reverberant-tail:states={chosen}" if significant else "none"
     return finding("reverberant-tail", significant, score, params, explanation, remedy,

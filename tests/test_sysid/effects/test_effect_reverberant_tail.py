@@ -87,10 +87,10 @@ def test_the_hd600_explanation_reads_as_the_user_needs_it():
     top = capped_diagnosis("hptf_hd600_left").significant[0]
     # 46 ms of ringing (its 2048 taps), some 330 states against the model's 60, and what the states between buy.
     assert "rings for at least 4" in top["explanation"] and "reflections" in top["explanation"]
-    ladder = top["params"]["ladder"]
-    assert [n for n, _ in ladder][0] == 60 and ladder[-1][0] > top["params"]["states"]
-    ratios = dict((n, r) for n, r in ladder)
+    ratios = dict(top["params"]["ladder"])
+    assert max(ratios) > top["params"]["states"] and top["params"]["model_states"] == 60
     assert ratios[60] > 10 > ratios[120] > ratios[240] > ratios[top["params"]["states"]]
+    assert "more states: 120 states" in top["explanation"]
 
 
 @pytest.mark.parametrize("name", sorted(CAPPED))
