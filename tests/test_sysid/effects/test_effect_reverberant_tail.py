@@ -21,6 +21,8 @@ from sysid.diagnose import diagnose, format_findings
 from sysid.estimation.long_response import fir_estimate, frequency_limited_truncation
 from sysid.findings.tail import (band_envelope, length_above_noise, ladder_text, long_response, noise_rms,
                                  tail_spectra, truncation_ladder)
+from sysid.identify import IdentificationOptions, identify
+from sysid.random_plant import random_session
 from sysid.refine import format_refinement, refine, refine_auto
 from sysid.simulate import measured_session
 from sysid.validation.compare import compare
@@ -93,7 +95,10 @@ def test_the_hd600_explanation_reads_as_the_user_needs_it():
     assert "more states: 120 states" in top["explanation"]
 
 
-@pytest.mark.parametrize("name", sorted(CAPPED))
+# The HD 600's 330 states take minutes of refinement on a busy 2-core machine (BENCHMARKS.md, reverberant tail):
+# the default run holds FABIAN's.
+@pytest.mark.parametrize("name", ["fabian_left_az60",
+                                  pytest.param("hptf_hd600_left", marks=pytest.mark.slow)])
 def test_refine_auto_with_the_cap_lifted_reaches_the_floor(name):
     session, model, comparison = capped_case(name)
     auto = refine_auto(model, session.noise, session.sweeps, max_order=MAX_ORDER)
@@ -135,6 +140,17 @@ def test_one_missing_mode_is_under_modelled_not_a_tail():
 @pytest.mark.parametrize("path, seed", [("fb", 3), ("ff", 3), ("ff", 8)])
 def test_clean_sessions_never_raise_it(path, seed):
     session, model = effect_case(path, seed, ())
+    findings = diagnose(model, session.noise, session.sweeps)
+    assert not next(f for f in findings if f["effect"] == "reverberant-tail")["significant"], format_findings(findings)
+
+
+# Random helmets identified as a user would (the order search), cheap ones spanning the drawn range in the default
+# run; the slow run adds those whose order search once stalled above the floor (test_identify_random.py).
+@pytest.mark.parametrize("path, seed", [("fb", 3), ("fb", 44), ("ff", 3),
+                                        *[pytest.param("fb", s, marks=pytest.mark.slow) for s in (1, 25, 27, 63, 72)]])
+def test_clean_random_helmets_never_raise_it(path, seed):
+    session = random_session(seed, path, **SHORT)
+    model = identify(session.noise, session.sweeps, path, IdentificationOptions(gammas=tuple(range(10, 1001, 30)))).model
     findings = diagnose(model, session.noise, session.sweeps)
     assert not next(f for f in findings if f["effect"] == "reverberant-tail")["significant"], format_findings(findings)
 
