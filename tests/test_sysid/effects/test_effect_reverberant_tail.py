@@ -155,6 +155,17 @@ def test_clean_random_helmets_never_raise_it(path, seed):
     assert not next(f for f in findings if f["effect"] == "reverberant-tail")["significant"], format_findings(findings)
 
 
+@pytest.mark.parametrize("seed, highest", [(1, 8), (27, 10), (72, 6)])
+def test_random_helmets_short_of_a_few_modes_are_under_modelled_not_a_tail(seed, highest):
+    # Rational paths of 12-15 states identified at most `highest`: the truncation needs few states more than the
+    # model holds (or removes too little of the error): more order, not a dense tail.
+    session = random_session(seed, "fb", **SHORT)
+    options = IdentificationOptions(gammas=tuple(range(10, 1001, 30)), orders=tuple(range(2, highest + 1)),
+                                    refine_seconds=2.0)
+    findings = diagnose(identify(session.noise, session.sweeps, "fb", options).model, session.noise, session.sweeps)
+    assert [f["effect"] for f in findings.significant] == ["under-modelled"], format_findings(findings)
+
+
 class TestEnvelope:
     FS = 44100.0
 
