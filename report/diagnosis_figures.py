@@ -295,6 +295,10 @@ def finding_figure(finding: dict, context: DiagnosisContext, spectra: Spectra, d
     (its comparison included); ``spectra`` those of the noise recording after its transient.
     """
     plot = FINDING_PLOTS.get(finding["effect"], _mismatch)
+    if finding["effect"] in registry.names():
+        # The detector's module provides the shared values its plot reads ("segments", "long-response"):
+        # resolving the reference loads it (runs nothing) when no diagnosis has in this process.
+        registry.get(finding["effect"]).detect
     return plot(context, spectra, finding, dpi)
 
 
