@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from effect_sessions import effect_case
 
+from helmet_anc.cli import main
 from sysid.core import lti
 from sysid.core.model import MAX_ORDER, Model
 from sysid.core.thresholds import AT_FLOOR, IDENTIFICATION_BAND, TRANSIENT_S
@@ -24,7 +25,7 @@ from sysid.findings.tail import (band_envelope, length_above_noise, ladder_text,
 from sysid.identify import IdentificationOptions, identify
 from sysid.random_plant import random_session
 from sysid.refine import format_refinement, refine, refine_auto
-from sysid.simulate import measured_session
+from sysid.simulate import measured_session, write_session
 from sysid.validation.compare import compare
 
 SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
@@ -116,6 +117,19 @@ def test_at_the_state_cap_refine_auto_says_how_far_it_is_and_what_more_states_bu
     assert auto.stop_reason.startswith("at the state cap (12 states"), text
     assert "x the noise floor" in auto.stop_reason and "refine --auto --max-order" in auto.stop_reason, text
     assert auto.after.ratio <= comparison.ratio
+
+
+def test_the_command_line_lifts_the_cap_with_max_order(tmp_path, capsys):
+    session, model, comparison = capped_case("fabian_left_az60")
+    files = write_session(session, tmp_path / "session")
+    model.save(tmp_path / "capped.json")
+    code = main(["-q", "refine", str(tmp_path / "capped.json"), "--noise", str(files["noise"]), "--sweep", str(files["sweep1"]),
+                 "--sweep", str(files["sweep2"]), "--auto", "--max-order", "30", "-o", str(tmp_path / "r.json")])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    refined = Model.load(tmp_path / "r.json")
+    assert "+ reverberant-tail" in out and "at the floor" in out, out
+    assert 12 < refined.order <= 30 and refined.identification["max_order"] == 30
 
 
 def test_refine_holds_the_tail_to_the_cap():
