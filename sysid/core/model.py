@@ -32,7 +32,7 @@ MAX_ORDER = 1000           # states; a measured path's long tail needs hundreds 
 MAX_DELAY_S = 1.0          # seconds of pure delay: 340 m of sound path
 MAX_COEFFICIENT = 1e8      # largest |entry| of A, B, C, D
 MAX_FS = 1e6               # Hz
-MAX_MODEL_BYTES = 64e6     # a model of MAX_ORDER states is well under 1 MB of JSON
+MAX_MODEL_BYTES = 64e6     # a model of MAX_ORDER states is about 28 MB of JSON (A: 1e6 entries)
 
 
 def _numeric(value, name: str) -> np.ndarray:
