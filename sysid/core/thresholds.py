@@ -279,11 +279,11 @@ VARIATION_CHANGE_T = 6.0
 
 # Reverberant tail (sysid.findings.tail). The noise recording's least-squares FIR is TAIL_FIRST_S long,
 # doubled at most TAIL_DOUBLINGS times while the response rings in its last quarter (at 44.1 kHz 1102 and
-# 2204 taps, 46 ms at most; about 1 and 3 s on a 23 s recording: the cost grows as the taps' cube); its envelope is averaged over TAIL_ENVELOPE_S and is above
-# the noise while at least TAIL_ABOVE_NOISE_DB above the noise's envelope (a 1 ms average of band-limited
-# noise holds about 10 degrees of freedom: 6 dB is out of its reach); the tail starts once the direct sound
-# has fallen TAIL_DIRECT_DB below the peak. The ladder's target is AT_FLOOR, or TAIL_LADDER_SLACK times
-# the FIR's own ratio when the estimate cannot get there. The tail is the finding when the states it needs
+# 2204 taps, 46 ms at most; about 1 and 3 s on a 23 s recording: the cost grows as the taps' cube); its
+# envelope is averaged over TAIL_ENVELOPE_S and is above the noise while at least TAIL_ABOVE_NOISE_DB above
+# the noise's envelope (a 1 ms average of band-limited noise holds about 10 degrees of freedom: 6 dB is out of
+# its reach); the tail starts once the direct sound has fallen TAIL_DIRECT_DB below the peak. The ladder's
+# target is AT_FLOOR, or TAIL_LADDER_SLACK times the FIR's own ratio when the estimate cannot get there. The tail is the finding when the states it needs
 # are TAIL_STATES_RATIO times the model's (counted as the truncation's order that validates as well as the
 # model) and TAIL_MIN_EXTRA_STATES more: dense modes, not a few missing modes (under-modelled) nor a missing
 # factor of one or two states.

@@ -219,8 +219,8 @@ class TruncationLadder:
     ``orders``/``ratios`` ascending in order; ``needed``: the lowest order within ``target`` (None when
     none is); ``best``: the order of lowest ratio; ``fir_ratio``: the FIR's own; ``model_ratio``: the model's
     by the same reckoning (the sweeps' DFT bins); ``model_states``: the lowest order that validates as well as
-    the model, within ``TAIL_LADDER_SLACK`` (the model's order in truncation's currency: output error holds a response in fewer states, 3x
-    fewer on a 5-state helmet path); ``truncation``: every order's realisation.
+    the model, within ``TAIL_LADDER_SLACK`` (the model's order in truncation's currency: output error holds a
+    response in fewer states, 3x fewer on a 5-state helmet path); ``truncation``: every order's realisation.
     """
 
     orders: tuple[int, ...]
@@ -263,7 +263,8 @@ def truncation_ladder(taps: np.ndarray, fs: float, delay: int, spectra: list[Swe
     def exact(response) -> float:
         return rms_from_responses(spectra, [response(s.frequencies) for s in spectra]) / floor
 
-    fir_ratio = exact(lambda f: np.polyval(taps[::-1], np.exp(-2j * np.pi * f / fs)) * np.exp(-2j * np.pi * f * delay / fs))
+    fir_ratio = exact(lambda f: np.polyval(taps[::-1], np.exp(-2j * np.pi * f / fs))
+                      * np.exp(-2j * np.pi * f * delay / fs))
     model_ratio = exact(model.frequency_response) if model is not None else float("nan")
     target = max(AT_FLOOR, TAIL_LADDER_SLACK * fir_ratio)
     scores: dict[int, float] = {}
@@ -393,7 +394,8 @@ def tail_finding(ctx: DiagnosisContext):
     shape = _tail_shape(response)
     length_ms = 1e3 * response.length_s
     params = {"length_ms": length_ms, "length_complete": response.complete, "order": model.order, "max_order": cap,
-              "states": chosen, "states_reach_floor": ladder.needed is not None and ladder.ratio(chosen) <= AT_FLOOR, "rms_over_floor": ctx.excess,
+              "states": chosen, "states_reach_floor": ladder.needed is not None and ladder.ratio(chosen) <= AT_FLOOR,
+              "rms_over_floor": ctx.excess,
               "rms_at_states": ladder.ratio(chosen), "ladder": ladder.table(),
               "model_length_ms": 1e3 * response.model_length_s, "model_states": held_states, **shape}
     at_least = "" if response.complete else "at least "
