@@ -436,10 +436,15 @@ def _at_cap(cap: int, model: Model, current: Comparison, diagnosis) -> str:
     tail = next((f for f in diagnosis if f.effect == "reverberant-tail" and f.params.get("ladder")), None)
     if tail is None:
         return text + f"; more states might lower it (refine --auto --max-order {model.order + 2} or more)"
-    more = ladder_text(tail.params["ladder"], model.order, tail.params["states"])
-    reach = "reaches the floor at about" if tail.params.get("states_reach_floor") else "needs more than"
-    return (text + f"; the reverberant tail {reach} {tail.params['states']} states (the long estimate truncated: "
-            f"{more}): refine --auto --max-order {tail.params['states']}")
+    states = tail.params["states"]
+    more = ladder_text(tail.params["ladder"], model.order, states)
+    if tail.params.get("states_reach_floor"):
+        reach = f"the reverberant tail reaches the floor at about {states} states"
+    else:
+        # The ladder's plateau: the states that pay, short of the floor (what is left is not for more states).
+        reach = (f"the reverberant tail's states that pay are about {states} ({tail.params['rms_at_states']:.2f}x; "
+                 f"more buy little)")
+    return text + f"; {reach} (the long estimate truncated: {more}): refine --auto --max-order {states}"
 
 
 def bounding_findings(diagnosis) -> list:

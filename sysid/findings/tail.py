@@ -399,7 +399,7 @@ def tail_finding(ctx: DiagnosisContext):
               "rms_at_states": ladder.ratio(chosen), "ladder": ladder.table(),
               "model_length_ms": 1e3 * response.model_length_s, "model_states": held_states, **shape}
     at_least = "" if response.complete else "at least "
-    words = [f"the response rings for {at_least}{length_ms:.0f} ms above the noise"]
+    words = [f"the response rings for {at_least}{length_ms:.{0 if length_ms >= 10 else 1}f} ms above the noise"]
     if shape:
         words.append(f" (its tail {-shape['level_db']:.0f} dB below the peak, decaying {shape['decay_db_per_ms']:.2f} "
                      f"dB/ms, its energy mostly at {shape['band_hz'][0]:.0f}-{shape['band_hz'][1]:.0f} Hz)")
