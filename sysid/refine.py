@@ -354,13 +354,19 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         candidates.sort(key=lambda f: f["effect"] not in corrections)
         specs, capped = _within_cap([(f, _auto_spec(f)) for f in candidates], model, cap)
         specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
-        if not specs and not at_floor and _allowed("under-modelled", rejected, retried, accepted):
-            # Everything named was tried and the error is still above the floor: more order is what is
-            # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
-            fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
-            more, held = _within_cap([(fallback, _auto_spec(fallback))], model, cap)
-            capped = capped or held
-            specs = [(f, spec) for f, spec in more if _step_key([spec], model) not in tried]
+        if not specs and not at_floor:
+            # Everything named was tried and the error is still above the floor: more states are what is left
+            # to try, each kept only if it pays: the long estimate's, where the tail's ladder reaches the floor
+            # (too few states beyond what the model holds to call the tail dense, but the data's own), then one
+            # more mode (diagnose's under-modelled without the named findings).
+            for fallback in _more_states(diagnosis, model):
+                if not _allowed(fallback["effect"], rejected, retried, accepted):
+                    continue
+                more, held = _within_cap([(fallback, _auto_spec(fallback))], model, cap)
+                capped = capped or held
+                specs = [(f, spec) for f, spec in more if _step_key([spec], model) not in tried]
+                if specs:
+                    break
         if not specs:
             stop_reason = (_at_cap(cap, model, current, diagnosis) if capped else
                            "effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
@@ -413,6 +419,14 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         if current.ratio <= AT_FLOOR:
             stop_reason = "at the floor"
     return AutoRefinement(model, steps, stop_reason, start, current)
+
+
+def _more_states(diagnosis, model: Model) -> list[dict]:
+    """The findings that add states, in the order ``refine_auto`` falls back on them: the reverberant tail's
+    when its truncation ladder reaches the floor above the model's order, then under-modelled's one mode."""
+    tail = [f for f in diagnosis if f["effect"] == "reverberant-tail" and f["params"].get("states_reach_floor")
+            and f["params"].get("states", 0) > model.order]
+    return tail[:1] + [{"effect": "under-modelled", "params": {}, "score": 0.0}]
 
 
 def _within_cap(specs: list, model: Model, cap: int | None) -> tuple[list, bool]:

@@ -378,6 +378,15 @@ def tail_finding(ctx: DiagnosisContext):
                                    ctx.comparison.noise_floor, model, start=max(model.order, 2))
         if behind.fir_ratio <= TAIL_LADDER_SLACK * ladder.fir_ratio:
             ladder = behind
+    if model.delay > 0:
+        # A delay the model holds may cut into a slow onset (a capped model fits it better a few samples later):
+        # the response from the input on is judged instead when its estimate validates materially better.
+        front = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D,
+                      input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
+        whole = truncation_ladder(long_response(front, ctx.noise, ctx.transient_s).taps, fs, 0, spectra,
+                                  ctx.comparison.noise_floor, model, start=max(model.order, 2))
+        if TAIL_LADDER_SLACK * whole.fir_ratio < ladder.fir_ratio:
+            ladder = whole
     chosen = ladder.needed if ladder.needed is not None else ladder.best
     gain = ladder.model_ratio / ladder.ratio(chosen) if ladder.ratio(chosen) > 0 else 0.0
     # The share of the error power above the floor that the states remove (as a series factor's, FACTOR_SHARE):

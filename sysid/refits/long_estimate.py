@@ -9,7 +9,9 @@ detector's estimate, held to the state cap by ``refine``): the detector's own la
 (``sysid.findings.tail.truncation_ladder``) on the corrected data. Where affordable (at most
 ``TAIL_OE_MAX_ORDER`` states) the truncation is refined by output error on the raw DFT data
 (``sysid.estimation.output_error``), which beats truncation at equal order; the better on
-the sweeps is kept, and ``refine`` keeps the step only if it validates better.
+the sweeps is kept, and ``refine`` keeps the step only if it validates better. A model that holds a delay
+is tried behind it and from the input on (its delay then 0, the onset in the states): a capped model may
+have fitted a delay into a measured response's slow onset, which the longer core holds.
 
 The refined model is a plain state-space model of the higher order, not a parallel FIR
 tail beside the core: the model contract (design.md, "The model") is unchanged, and every
@@ -29,7 +31,7 @@ from ..estimation.output_error import block_data, refine_output_error
 from ..findings.tail import long_response, tail_finding, truncation_ladder
 from ..validation.compare import compare
 from ..validation.sweeps import sweep_spectrum
-from .machinery import REFIT_OPTIONS, _plain_input, _transformed, _with
+from .machinery import REFIT_OPTIONS, _shift, _transformed, _with
 
 __all__ = ["add_tail", "complete_states"]
 
@@ -49,32 +51,44 @@ def add_tail(model: Model, noise, sweeps, params, options, transient_s):
     states = int(params["states"])
     if states <= model.order:
         raise IdentificationError(f"reverberant-tail: {states} states are no more than the model's {model.order}")
-    recordings = _transformed(model, [noise, *sweeps], _plain_input(model), model.disturbance_frequencies)
+    floor = compare(model, sweeps).noise_floor
+    # Behind the model's delay, and from the input on when it holds one: a delay fitted by a capped model may cut
+    # into a slow onset that the longer core holds (the detector judges both the same way).
+    trials = []
+    for delay in dict.fromkeys((model.delay, 0)):
+        trials += _trials(model, noise, sweeps, states, delay, floor, options, transient_s)
+    scored = sorted(((compare(t, sweeps).rms, k) for k, (t, _) in enumerate(trials) if t.stable))
+    if not scored:
+        raise IdentificationError(f"reverberant-tail: no truncation of at most {states} states is stable")
+    best, extra = trials[scored[0][1]]
+    return best, {"order": best.order, **extra}
+
+
+def _trials(model: Model, noise, sweeps, states: int, delay: int, floor: float, options, transient_s) -> list:
+    """[(model, what it is), ...]: the long estimate behind ``delay`` samples truncated at the lowest order up to
+    ``states`` that reaches the floor, and its output-error refinement where affordable."""
+    plain = model.apply_input_nonlinearity
+    recordings = _transformed(model, [noise, *sweeps], lambda u: _shift(plain(u), delay), model.disturbance_frequencies)
     # The corrected recordings are what a bare core sees: no delay, polynomial, offset or lines of its own.
     bare = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D)
     response = long_response(bare, recordings[0], transient_s)
-    floor = compare(model, sweeps).noise_floor
     spectra = [sweep_spectrum(r) for r in recordings[1:]]
     # From the states asked down to the lowest that reaches the floor (the detector's ladder ran upwards).
     ladder = truncation_ladder(response.taps, model.fs, 0, spectra, floor, start=states, cap=states,
                                lowest=model.order + 1)
     order = ladder.needed if ladder.needed is not None else ladder.best
     system, reflected = ladder.truncation.realisation(order)
-    truncated = _with(model, lti.balanced_realisation(*system))
-    trials = [truncated]
+    truncated = _with(model, lti.balanced_realisation(*system), delay=delay)
+    what = {"fir_taps": int(response.taps.size), "length_ms": 1e3 * response.length_s,
+            "truncation_ratio": ladder.ratio(order), "reflected_poles": reflected, "output_error": False}
+    trials = [(truncated, what)]
     if order <= TAIL_OE_MAX_ORDER and truncated.stable:
         seconds = (options or REFIT_OPTIONS).refine_seconds
         data = block_data(recordings[0].trimmed(transient_s), IDENTIFICATION_BAND, seconds)
         try:
             oe = refine_output_error(truncated.A, truncated.B, truncated.C, truncated.D, data,
                                      feedthrough=bool(truncated.D[0, 0]), noise_tolerance=True)
-            trials.append(_with(model, (oe.A, oe.B, oe.C, oe.D)))
+            trials.append((_with(model, (oe.A, oe.B, oe.C, oe.D), delay=delay), {**what, "output_error": True}))
         except IdentificationError:
             pass
-    scored = sorted(((compare(t, sweeps).rms, k) for k, t in enumerate(trials) if t.stable))
-    if not scored:
-        raise IdentificationError(f"reverberant-tail: the truncation at {order} states is unstable")
-    best = trials[scored[0][1]]
-    return best, {"order": best.order, "fir_taps": int(response.taps.size), "length_ms": 1e3 * response.length_s,
-                  "truncation_ratio": ladder.ratio(order), "reflected_poles": reflected,
-                  "output_error": scored[0][1] == 1}
+    return trials

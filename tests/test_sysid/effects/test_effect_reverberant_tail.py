@@ -117,6 +117,13 @@ def test_at_the_state_cap_refine_auto_says_how_far_it_is_and_what_more_states_bu
     assert auto.stop_reason.startswith("at the state cap (12 states"), text
     assert "x the noise floor" in auto.stop_reason and "refine --auto --max-order" in auto.stop_reason, text
     assert auto.after.ratio <= comparison.ratio
+    # What it says more states buy, they buy: from the model refined at the cap (which fitted a delay into the
+    # response's slow onset), the cap lifted to the states it names reaches the floor.
+    named = int(auto.stop_reason.rsplit("--max-order", 1)[1])
+    assert 12 < named <= 2 * states_the_taps_need(session, comparison), text
+    lifted = refine_auto(auto.model, session.noise, session.sweeps, max_order=named)
+    more = format_refinement(lifted.steps, lifted.stop_reason)
+    assert lifted.after.ratio <= AT_FLOOR and lifted.model.order <= named, more
 
 
 def test_the_command_line_lifts_the_cap_with_max_order(tmp_path, capsys):
