@@ -25,8 +25,6 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-import numpy as np
-
 from . import effects as registry
 from . import refits
 from .core.effect_spec import EffectSpec, parse_effect
@@ -36,10 +34,10 @@ from .core.thresholds import AT_FLOOR, MAX_AUTO_STEPS, RUN_TO_RUN_MIN, TRANSIENT
 from .diagnose import diagnose
 from .findings.context import detector_context
 from .findings.input_noise import bound_ratio
-from .findings.tail import ladder_text
 from .identify import IdentificationOptions
 from .io.recordings import Recording
 from .refits import REFIT_OPTIONS
+from .refits.state_cap import at_cap, held_to_cap, more_states, state_cap, within_cap
 from .validation.compare import Comparison, compare
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
@@ -139,34 +137,6 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
     return params
 
 
-def state_cap(model: Model, max_order: int | None = None) -> int | None:
-    """The state cap refinement holds to: ``max_order`` if given, else the model's own
-    (``identification["max_order"]``, the cap it was identified under), else None (no cap)."""
-    cap = max_order if max_order is not None else model.identification.get("max_order")
-    if cap is None:
-        return None
-    if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
-        raise IdentificationError(f"--max-order must be a whole number of states of at least 1; found {cap!r}")
-    return int(cap)
-
-
-def _held_to_cap(kind: str, params: dict, model: Model, cap: int | None) -> dict:
-    """``params`` with the states they add cut to ``cap``: ``states`` (the order after the step) or
-    ``extra_order`` (states added); IdentificationError when the model is at the cap already."""
-    if cap is None or not ({"states", "extra_order"} & set(params)):
-        return params
-    room = cap - model.order
-    if room <= 0:
-        raise IdentificationError(f"--add {kind}: the model holds {model.order} states, at the state cap of {cap} "
-                                  f"(--max-order)")
-    params = dict(params)
-    if params.get("states") is not None:
-        params["states"] = min(int(params["states"]), cap)
-    if params.get("extra_order") is not None:
-        params["extra_order"] = min(int(params["extra_order"]), room)
-    return params
-
-
 def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
            transient_s: float = TRANSIENT_S, before: Comparison | None = None, max_order: int | None = None) -> Refinement:
     """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify, holding the model to
@@ -176,7 +146,7 @@ def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, opti
         raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
     cap = state_cap(model, max_order)
     before = before or compare(model, sweeps)
-    params = _held_to_cap(spec.kind, _complete(spec, model, noise, sweeps, before, transient_s), model, cap)
+    params = held_to_cap(spec.kind, _complete(spec, model, noise, sweeps, before, transient_s), model, cap)
     effect = registry.get(spec.kind)
     refined, extra = effect.build(model, noise, sweeps, params, options, transient_s)
     if cap is not None and refined.order > max(cap, model.order):
@@ -352,23 +322,23 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
                                        if unmodellable else "")
                 break
         candidates.sort(key=lambda f: f["effect"] not in corrections)
-        specs, capped = _within_cap([(f, _auto_spec(f)) for f in candidates], model, cap)
+        specs, capped = within_cap([(f, _auto_spec(f)) for f in candidates], model, cap)
         specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
         if not specs and not at_floor:
             # Everything named was tried and the error is still above the floor: more states are what is left
             # to try, each kept only if it pays: the long estimate's, where the tail's ladder reaches the floor
             # (too few states beyond what the model holds to call the tail dense, but the data's own), then one
             # more mode (diagnose's under-modelled without the named findings).
-            for fallback in _more_states(diagnosis, model):
+            for fallback in more_states(diagnosis, model):
                 if not _allowed(fallback["effect"], rejected, retried, accepted):
                     continue
-                more, held = _within_cap([(fallback, _auto_spec(fallback))], model, cap)
+                more, held = within_cap([(fallback, _auto_spec(fallback))], model, cap)
                 capped = capped or held
                 specs = [(f, spec) for f, spec in more if _step_key([spec], model) not in tried]
                 if specs:
                     break
         if not specs:
-            stop_reason = (_at_cap(cap, model, current, diagnosis) if capped else
+            stop_reason = (at_cap(cap, model, current, diagnosis) if capped else
                            "effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
                            else "nothing left that lowers the error")
             break
@@ -419,46 +389,6 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         if current.ratio <= AT_FLOOR:
             stop_reason = "at the floor"
     return AutoRefinement(model, steps, stop_reason, start, current)
-
-
-def _more_states(diagnosis, model: Model) -> list[dict]:
-    """The findings that add states, in the order ``refine_auto`` falls back on them: the reverberant tail's
-    when its truncation ladder reaches the floor above the model's order, then under-modelled's one mode."""
-    tail = [f for f in diagnosis if f["effect"] == "reverberant-tail" and f["params"].get("states_reach_floor")
-            and f["params"].get("states", 0) > model.order]
-    return tail[:1] + [{"effect": "under-modelled", "params": {}, "score": 0.0}]
-
-
-def _within_cap(specs: list, model: Model, cap: int | None) -> tuple[list, bool]:
-    """(the steps with the states they add cut to the state cap, whether a step was cut or left out at it)."""
-    kept, capped = [], False
-    for f, spec in specs:
-        try:
-            held = _held_to_cap(spec.kind, spec.params, model, cap)
-        except IdentificationError:
-            capped = True
-            continue
-        capped = capped or held != spec.params
-        kept.append((f, EffectSpec(spec.kind, held)))
-    return kept, capped
-
-
-def _at_cap(cap: int, model: Model, current: Comparison, diagnosis) -> str:
-    """Why ``refine_auto`` stopped at the state cap: how far from the floor, and what more states would buy (the
-    reverberant tail's truncation ladder, when diagnose read one)."""
-    text = f"at the state cap ({cap} states, --max-order): the validation error is {current.ratio:.2f}x the noise floor"
-    tail = next((f for f in diagnosis if f.effect == "reverberant-tail" and f.params.get("ladder")), None)
-    if tail is None:
-        return text + f"; more states might lower it (refine --auto --max-order {model.order + 2} or more)"
-    states = tail.params["states"]
-    more = ladder_text(tail.params["ladder"], model.order, states)
-    if tail.params.get("states_reach_floor"):
-        reach = f"the reverberant tail reaches the floor at about {states} states"
-    else:
-        # The ladder's plateau: the states that pay, short of the floor (what is left is not for more states).
-        reach = (f"the reverberant tail's states that pay are about {states} ({tail.params['rms_at_states']:.2f}x; "
-                 f"more buy little)")
-    return text + f"; {reach} (the long estimate truncated: {more}): refine --auto --max-order {states}"
 
 
 def bounding_findings(diagnosis) -> list:
