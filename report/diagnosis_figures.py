@@ -229,6 +229,32 @@ def _series_factor(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: 
     return figure
 
 
+def _tail(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
+    """The noise recording's impulse-response envelope against the model's and the residual's, in dB over the
+    estimate's noise, with the response's length marked (the shared value ``"long-response"``)."""
+    response = ctx.value("long-response")
+    t_ms = 1e3 * response.times_s
+    noise = response.noise ** 2
+    figure, (ax,) = new_figure(1, 1, height=3.2, dpi=dpi)
+    for envelope, color, label in ((response.envelope, "black", "data (least-squares FIR)"),
+                                   (response.model_envelope, COLORS["model"], f"model ({ctx.model.order} states)"),
+                                   (response.residual_envelope, COLORS["seed"], "data - model")):
+        ax.plot(t_ms, 10 * np.log10(np.maximum(envelope, 1e-6 * noise) / noise), color=color, lw=0.9, label=label)
+    ax.axhline(0.0, color=COLORS["noise_floor"], ls="--", lw=1.0, label="the estimate's noise")
+    length = 1e3 * response.length_s
+    ax.axvline(length, color=COLORS["frequency"], ls=":", lw=1.2,
+               label=f"above the noise for {'' if response.complete else 'at least '}{length:.1f} ms")
+    if "start_ms" in finding["params"]:
+        ax.axvspan(finding["params"]["start_ms"], length, color=COLORS["highlight"], alpha=0.2, label="the tail")
+    ax.set_xlabel("time after the input (ms)")
+    ax.set_ylabel("envelope over the noise (dB)")
+    ax.set_ylim(-10.0, None)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    _title(ax, finding)
+    return figure
+
+
 # The figure kinds the registry's effects name (``sysid.effects.FIGURES``).
 FIGURE_KINDS = {
     "delay-scan": _delay,
@@ -239,6 +265,7 @@ FIGURE_KINDS = {
     "segments": _variation,
     "levels": _recording_levels,
     "mismatch": _mismatch,
+    "tail": _tail,
 }
 
 
@@ -268,6 +295,10 @@ def finding_figure(finding: dict, context: DiagnosisContext, spectra: Spectra, d
     (its comparison included); ``spectra`` those of the noise recording after its transient.
     """
     plot = FINDING_PLOTS.get(finding["effect"], _mismatch)
+    if finding["effect"] in registry.names():
+        # The detector's module provides the shared values its plot reads ("segments", "long-response"):
+        # resolving the reference loads it (runs nothing) when no diagnosis has in this process.
+        registry.get(finding["effect"]).detect
     return plot(context, spectra, finding, dpi)
 
 

@@ -12,6 +12,11 @@ validation error worse is flagged (``step["worse"]``) and, in ``refine_auto``, r
 ``refine_auto`` repeats diagnose -> add the top significant finding -> refit,
 monotone and bounded (see its docstring); the data corrections it finds pending
 are applied together, then one re-identification (``refine_corrections``).
+
+Both hold the model to a state cap (``max_order``: what the board can afford; by default the
+cap the model was identified under, ``identification["max_order"]``, if any): a step that adds
+states (``states``, the order after it, or ``extra_order``) is cut to the cap, and ``refine_auto``
+stops at the cap saying how far from the floor the model is and what more states would buy.
 """
 
 from __future__ import annotations
@@ -32,10 +37,11 @@ from .findings.input_noise import bound_ratio
 from .identify import IdentificationOptions
 from .io.recordings import Recording
 from .refits import REFIT_OPTIONS
+from .refits.state_cap import at_cap, held_to_cap, more_states, state_cap, within_cap
 from .validation.compare import Comparison, compare
 
 __all__ = ["REFINE_EFFECTS", "NOT_REFINABLE", "REFIT_OPTIONS", "Refinement", "RefinementStep", "AutoRefinement",
-           "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement"]
+           "refine", "refine_corrections", "refine_auto", "format_refinement", "parse_refinement", "state_cap"]
 
 
 class _RegistryView(Mapping):
@@ -132,15 +138,23 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
 
 
 def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
-           transient_s: float = TRANSIENT_S, before: Comparison | None = None) -> Refinement:
-    """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify."""
+           transient_s: float = TRANSIENT_S, before: Comparison | None = None, max_order: int | None = None) -> Refinement:
+    """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify, holding the model to
+    the state cap (``state_cap``)."""
     spec = effect if isinstance(effect, EffectSpec) else parse_refinement(effect)
     if spec.kind not in REFINE_EFFECTS:
         raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
+    cap = state_cap(model, max_order)
     before = before or compare(model, sweeps)
-    params = _complete(spec, model, noise, sweeps, before, transient_s)
+    params = held_to_cap(spec.kind, _complete(spec, model, noise, sweeps, before, transient_s), model, cap)
     effect = registry.get(spec.kind)
     refined, extra = effect.build(model, noise, sweeps, params, options, transient_s)
+    if cap is not None and refined.order > max(cap, model.order):
+        raise IdentificationError(f"refining with {spec.kind} gave {refined.order} states, above the state cap of "
+                                  f"{cap} (--max-order); the model is left unchanged")
+    if max_order is not None:
+        # The cap the user set is the model's from now on (``state_cap``'s default for the next refinement).
+        refined.identification["max_order"] = cap
     if refined.clock_ratio != 1.0 and effect.correct is None and refined.stable:
         # The clock ratio was read against a model that lacked this structure, whose misfit (harmonics,
         # say) biased the reading: read again against the refined model, kept only if it pays.
@@ -255,7 +269,8 @@ def _allowed(effect: str, rejected: dict[str, int], retried: set[str], accepted:
 
 
 def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options: IdentificationOptions | None = None,
-                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S, progress=None) -> AutoRefinement:
+                max_steps: int = MAX_AUTO_STEPS, transient_s: float = TRANSIENT_S, progress=None,
+                max_order: int | None = None) -> AutoRefinement:
     """Diagnose -> add the top significant structure or correction -> refit, monotone and bounded.
 
     A step is kept only if it lowers the validation rms by more than the run-to-run
@@ -267,10 +282,13 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
     stretches, output offset: effects with a ``correct``) are applied together before one
     re-identification (``refine_corrections``), one step naming each; kept when it passes
     the rule of any of them, and tried one at a time if not. ``stop_reason`` says why it stopped: "at the floor",
-    "nothing left that lowers the error", "effects that cannot be modelled: ...". ``progress(text)``, when
-    given, is told what each step does as it starts ("step 2: adding delay").
+    "nothing left that lowers the error", "effects that cannot be modelled: ...", "at the state cap ..." (what
+    more states would buy). ``progress(text)``, when given, is told what each step does as it starts ("step 2:
+    adding delay"). The state cap: ``max_order``, or the model's own (``state_cap``); a step that adds states is
+    cut to it.
     """
     say = progress or (lambda text: None)
+    cap = state_cap(model, max_order)
     start = current = compare(model, sweeps)
     steps: list[RefinementStep] = []
     rejected: dict[str, int] = {}  # effect -> accepted steps before it was rejected
@@ -307,15 +325,24 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
                                        if unmodellable else "")
                 break
         candidates.sort(key=lambda f: f["effect"] not in corrections)
-        specs = [(f, _auto_spec(f)) for f in candidates]
+        specs, capped = within_cap([(f, _auto_spec(f)) for f in candidates], model, cap)
         specs = [(f, spec) for f, spec in specs if _step_key([spec], model) not in tried]
-        if not specs and not at_floor and _allowed("under-modelled", rejected, retried, accepted):
-            # Everything named was tried and the error is still above the floor: more order is what is
-            # left to try (diagnose's under-modelled without the named findings); kept only if it pays.
-            fallback = {"effect": "under-modelled", "params": {}, "score": 0.0}
-            specs = [(fallback, spec) for spec in [_auto_spec(fallback)] if _step_key([spec], model) not in tried]
+        if not specs and not at_floor:
+            # Everything named was tried and the error is still above the floor: more states are what is left
+            # to try, each kept only if it pays: the long estimate's, where the tail's ladder reaches the floor
+            # (too few states beyond what the model holds to call the tail dense, but the data's own), then one
+            # more mode (diagnose's under-modelled without the named findings).
+            for fallback in more_states(diagnosis, model):
+                if not _allowed(fallback["effect"], rejected, retried, accepted):
+                    continue
+                more, held = within_cap([(fallback, _auto_spec(fallback))], model, cap)
+                capped = capped or held
+                specs = [(f, spec) for f, spec in more if _step_key([spec], model) not in tried]
+                if specs:
+                    break
         if not specs:
-            stop_reason = ("effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
+            stop_reason = (at_cap(cap, model, current, diagnosis) if capped else
+                           "effects that cannot be modelled: " + ", ".join(unmodellable) if unmodellable
                            else "nothing left that lowers the error")
             break
         # Every pending data correction (clock ratio, clipped stretches, offset) in one step before one
@@ -333,7 +360,7 @@ def refine_auto(model: Model, noise: Recording, sweeps: list[Recording], options
         say(f"step {len(steps) + 1}: adding {' + '.join(s.kind for s in chosen)} and refitting")
         try:
             result = (refine_corrections(model, noise, sweeps, chosen, options, transient_s, current) if combined
-                      else refine(model, noise, sweeps, chosen[0], options, transient_s, current))
+                      else refine(model, noise, sweeps, chosen[0], options, transient_s, current, max_order=cap))
         except HelmetAncError as exc:
             # An unstable or failed refit is reported as a rejected step, never returned.
             params = {k: v for s in chosen for k, v in s.params.items()}

@@ -49,8 +49,8 @@ def prepare(folder: Path, session: dict, model_file: Path) -> dict[str, str]:
     files["nan"] = folder / "nan.json"
     files["huge"] = _model_variant(model, folder, "huge.json", C=[[1e300] * n])
     files["delay"] = _model_variant(model, folder, "delay.json", delay=1e9)
-    files["order"] = _model_variant(model, folder, "order.json", A=np.eye(500).tolist(), B=[[0.0]] * 500,
-                                    C=[[0.0] * 500])
+    files["order"] = _model_variant(model, folder, "order.json", A=np.eye(1500).tolist(), B=[[0.0]] * 1500,
+                                    C=[[0.0] * 1500])
     files["folder"] = folder / "a_folder"
     files["folder"].mkdir(exist_ok=True)
     files["user_notes"] = folder / "notes.json"
@@ -110,7 +110,7 @@ CASES = (
     BadInput("model matrix with NaN", ("compare", "{nan}", *_SWEEPS), "non-finite"),
     BadInput("model coefficient 1e300", ("compare", "{huge}", *_SWEEPS), "above the limit"),
     BadInput("model delay of 1e9 samples", ("diagnose", "{delay}", *_RECORDINGS), "above the limit"),
-    BadInput("model of order 500", ("compare", "{order}", *_SWEEPS), "above the limit"),
+    BadInput("model of order 1500", ("compare", "{order}", *_SWEEPS), "above the limit"),
     BadInput("a folder given as a sweep", ("compare", "{model}", "--sweep", "{folder}", "--sweep", "{sweep2}"),
              "is a folder"),
     BadInput("a folder given as the model", ("compare", "{folder}", *_SWEEPS), "is a folder"),
@@ -127,6 +127,13 @@ CASES = (
     BadInput("-o naming an input recording", ("identify", *_RECORDINGS, "-o", "{sweep2}", "--force"), "is an input"),
     BadInput("-o naming the model read", ("refine", "{model}", *_RECORDINGS, "--add", "delay:2", "-o", "{model}"),
              "is an input"),
+    BadInput("--max-order of no states", ("refine", "{model}", *_RECORDINGS, "--auto", "--max-order", "0",
+                                          "-o", "{folder}/r.json"), "--max-order"),
+    BadInput("--max-order that is not a number", ("refine", "{model}", *_RECORDINGS, "--auto", "--max-order", "many",
+                                                  "-o", "{folder}/r.json"), "--max-order"),
+    BadInput("--add more states to a model at the state cap",
+             ("refine", "{model}", *_RECORDINGS, "--add", "under-modelled", "--max-order", "5", "-o", "{folder}/r.json"),
+             "state cap"),
     BadInput("-o naming a file helmet-anc did not write", ("compare", "{model}", *_SWEEPS, "--json", "{user_notes}"),
              "--force"),
     BadInput("-o in a folder that does not exist", ("identify", *_RECORDINGS, "-o", "{folder}/missing/m.json"),

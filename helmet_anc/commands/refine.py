@@ -22,6 +22,8 @@ def register(commands) -> None:
     parser.add_argument("--add", action="append", default=[], metavar="EFFECT[:PARAMS]",
                         help="structure to add, repeatable: " + ", ".join(REFINE_EFFECTS) + " (e.g. delay:23)")
     parser.add_argument("--auto", action="store_true", help="diagnose, add the top finding, refit, until done")
+    parser.add_argument("--max-order", metavar="N",
+                        help="state cap: the refined model holds at most N states (default: the model's own cap)")
     parser.add_argument("--report", metavar="PATH", help="also write the HTML report of the refined model (file or folder)")
     parser.add_argument("-o", "--output", required=True, metavar="NEW.json")
     add_force_option(parser)
@@ -31,6 +33,7 @@ def register(commands) -> None:
 def run(args) -> int:
     if bool(args.add) == bool(args.auto):
         raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
+    max_order = _max_order(args.max_order)
     specs = [parse_refinement(text) for text in args.add]
     output = check_output(args.output, args)
     model = Model.load(args.model)
@@ -41,14 +44,14 @@ def run(args) -> int:
     if args.auto:
         # One line per step when stderr is a pipe; the spinner names the step on a terminal.
         with busy("refine --auto", args.quiet) as step:
-            auto = refine_auto(model, noise, sweeps, progress=step)
+            auto = refine_auto(model, noise, sweeps, progress=step, max_order=max_order)
         model, steps, stop_reason = auto.model, auto.steps, auto.stop_reason
     else:
         steps = []
         for spec in specs:
             with busy("refine", args.quiet) as step:
                 step(f"adding {spec.kind} and refitting")
-                result = refine(model, noise, sweeps, spec)
+                result = refine(model, noise, sweeps, spec, max_order=max_order)
             steps.append(result.step)
             model = result.model
             if result.step.worse:
@@ -62,3 +65,16 @@ def run(args) -> int:
 
         print(f"wrote {write_report(report_target, model, noise, sweeps)}")
     return 0
+
+
+def _max_order(text: str | None) -> int | None:
+    """The --max-order value: a whole number of states, at least 1 (None when not given)."""
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise HelmetAncError(f"--max-order must be a whole number of states of at least 1; found {text!r}")
+    return value

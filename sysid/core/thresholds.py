@@ -295,6 +295,28 @@ VARIATION_LOW_HZ = 300.0
 VARIATION_CHANGE_DB = 0.3
 VARIATION_CHANGE_T = 6.0
 
+# Reverberant tail (sysid.findings.tail). The noise recording's least-squares FIR is TAIL_FIRST_S long,
+# doubled at most TAIL_DOUBLINGS times while the response rings in its last quarter (at 44.1 kHz 1102 and
+# 2204 taps, 46 ms at most; about 1 and 3 s on a 23 s recording: the cost grows as the taps' cube); its
+# envelope is averaged over TAIL_ENVELOPE_S and is above the noise while at least TAIL_ABOVE_NOISE_DB above
+# the noise's envelope (a 1 ms average of band-limited noise holds about 10 degrees of freedom: 6 dB is out of
+# its reach); the tail starts once the direct sound has fallen TAIL_DIRECT_DB below the peak. The ladder's
+# target is AT_FLOOR, or TAIL_LADDER_SLACK times the FIR's own ratio when the estimate cannot get there. The tail is the finding when the states it needs
+# are TAIL_STATES_RATIO times the model's (counted as the truncation's order that validates as well as the
+# model) and TAIL_MIN_EXTRA_STATES more: dense modes, not a few missing modes (under-modelled) nor a missing
+# factor of one or two states.
+TAIL_FIRST_S = 0.025
+TAIL_DOUBLINGS = 1
+TAIL_ENVELOPE_S = 0.001
+TAIL_ABOVE_NOISE_DB = 6.0
+TAIL_DIRECT_DB = 20.0
+TAIL_LADDER_SLACK = 1.05
+TAIL_STATES_RATIO = 1.5
+TAIL_MIN_EXTRA_STATES = 8
+
+__all__ += ["TAIL_FIRST_S", "TAIL_DOUBLINGS", "TAIL_ENVELOPE_S", "TAIL_ABOVE_NOISE_DB", "TAIL_DIRECT_DB",
+            "TAIL_LADDER_SLACK", "TAIL_STATES_RATIO", "TAIL_MIN_EXTRA_STATES"]
+
 # The report's grid (report.data), recomputed for a model without its identification run: the picture
 # of the seed's appendix C over a modest range at a fraction of the cost.
 MODEST_GAMMAS = tuple(range(10, 1001, 90))
@@ -311,7 +333,8 @@ __all__ += ["FACTOR_SHARE", "FACTOR_SIMPLER", "FACTOR_EDGE", "RESONANCE_MIN_GAIN
 # ---------------------------------------------------------------------------------------------------------------------
 # Refinement: the structures and data corrections refine adds (sysid.refits).
 # ---------------------------------------------------------------------------------------------------------------------
-__all__ += ["WARM_ENOUGH", "EIV_MIN_ATTENUATION", "CLIPPING_PASSES", "CLOCK_AR_ORDER", "CLOCK_AR_FLOOR", "CLOCK_PASSES"]
+__all__ += ["WARM_ENOUGH", "EIV_MIN_ATTENUATION", "CLIPPING_PASSES", "CLOCK_AR_ORDER", "CLOCK_AR_FLOOR", "CLOCK_PASSES",
+            "TAIL_OE_MAX_ORDER"]
 
 # A warm start within this factor of the noise floor makes the re-identification needless. Stricter
 # than AT_FLOOR: a warm start "at the floor" by AT_FLOOR may still lie 20 % above what a fresh fit
@@ -328,3 +351,6 @@ CLOCK_AR_ORDER = 32
 CLOCK_AR_FLOOR = 0.01
 # Passes of the clock ratio's refinement after a clock correction's refit (``refined_clock``).
 CLOCK_PASSES = 2
+# ``add_tail``: the long estimate's truncation is refined by output error up to this many states (its
+# Jacobian has two columns per state over every bin of the block: beyond it a step takes minutes).
+TAIL_OE_MAX_ORDER = 60

@@ -33,11 +33,11 @@ __all__ = list(_registry.__all__)
 def _load_builtin() -> None:
     # One module per effect; importing it registers its Effect.
     # the order is that of the detectors: data quality, the series factors, the delay (which settles
-    # a tie with them), then what the plant's misfit leaves, under-modelled last.
+    # a tie with them), then what the plant's misfit leaves, the reverberant tail, under-modelled last.
     from . import dc_offset, clipping  # noqa: F401
     from . import resonance, highpass, lowpass  # noqa: F401
     from . import delay, input_nonlinearity, periodic_disturbance, input_noise  # noqa: F401
-    from . import clock_drift, time_variation, under_modelled  # noqa: F401
+    from . import clock_drift, time_variation, reverberant_tail, under_modelled  # noqa: F401
 
 
 _load_builtin()

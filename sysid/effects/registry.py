@@ -21,8 +21,9 @@ __all__ = ["Effect", "register", "unregister", "registered", "get", "effects", "
 # The figure kinds of the report (``report.diagnosis_figures``): delay-scan (fit cost against
 # the delay), series-factor (measured/model response with the fitted factor over it), harmonics
 # (error spectrogram with the sweep's harmonics), lines (residual spectrum with the lines), h1-h2,
-# segments (per-segment responses and delays), levels (per-channel bars), mismatch (measured/model).
-FIGURES = ("delay-scan", "series-factor", "harmonics", "lines", "h1-h2", "segments", "levels", "mismatch")
+# segments (per-segment responses and delays), levels (per-channel bars), mismatch (measured/model), tail
+# (the data's and the model's impulse-response envelopes against the noise, the response's length marked).
+FIGURES = ("delay-scan", "series-factor", "harmonics", "lines", "h1-h2", "segments", "levels", "mismatch", "tail")
 
 
 @dataclass(frozen=True)

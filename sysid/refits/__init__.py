@@ -9,16 +9,22 @@ builder of each effect (``"sysid.refits:add_delay"``). The model chain is
   factor, a mode, more order, the errors-in-variables estimate);
 - ``corrections``: what a builder corrects in the data (DC offset, clock drift, clipping), and the
   refit on the corrected data;
+- ``long_estimate``: more states from the long least-squares estimate (a reverberant tail);
+- ``state_cap``: the state cap refinement holds a model to (``max_order``);
 - ``machinery``: the warm starts and re-identifications both share (``REFIT_OPTIONS``, ``WARM_ENOUGH``).
 """
 
 from __future__ import annotations
 
 from . import corrections as _corrections
+from . import long_estimate as _long_estimate
 from . import machinery as _machinery
+from . import state_cap as _state_cap
 from . import structures as _structures
 from .corrections import *  # noqa: F401,F403
+from .long_estimate import *  # noqa: F401,F403
 from .machinery import *  # noqa: F401,F403
+from .state_cap import *  # noqa: F401,F403
 from .structures import *  # noqa: F401,F403
 
-__all__ = [*_machinery.__all__, *_structures.__all__, *_corrections.__all__]
+__all__ = [*_machinery.__all__, *_structures.__all__, *_corrections.__all__, *_long_estimate.__all__, *_state_cap.__all__]

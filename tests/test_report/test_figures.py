@@ -212,6 +212,7 @@ class TestDiagnosisFigures:
         _finding("highpass", corner_hz=60.0, order=1),
         _finding("lowpass", corner_hz=2500.0, order=2),
         _finding("under-modelled", order=5, worst_band_hz=800.0),
+        _finding("reverberant-tail", length_ms=30.0, states=40, start_ms=2.0),
     ], ids=lambda f: f["effect"])
     def test_each_effect_gets_a_plot(self, ff, finding):
         session, result, comparison = ff
@@ -261,6 +262,25 @@ class TestDiagnosisFigures:
         levels = [line.get_ydata()[0] for line in figure.axes[0].get_lines()]
         assert levels == pytest.approx(list(20 * np.log10(2.0 + np.arange(4))))
 
+    def test_the_tail_is_drawn_from_the_context(self, ff):
+        from sysid.findings.tail import LongResponse
+
+        session, result, comparison = ff
+        context = DiagnosisContext(result.model, session.noise, session.sweeps, comparison)
+        fs, noise = session.noise.fs, 1e-6
+        decay = np.exp(-np.arange(441) / 44.1)
+        envelope = noise**2 * (1.0 + 1e8 * decay)
+        context.values["long-response"] = LongResponse(fs, 0, None, np.zeros(441), np.zeros(441), noise, envelope,
+                                                       envelope / 10, envelope / 100, 0.0075, 0.006, 0.005, True)
+        figure = figures.finding_figure(_finding("reverberant-tail", length_ms=7.5, states=40, start_ms=1.0), context,
+                                        result.spectra)
+        data = figure.axes[0].get_lines()[0]
+        # dB over the estimate's noise against ms from the input, the length marked.
+        np.testing.assert_allclose(data.get_ydata(), 10 * np.log10(envelope / noise**2))
+        assert data.get_xdata()[-1] == pytest.approx(1e3 * 440 / fs)
+        mark = next(line for line in figure.axes[0].get_lines() if "7.5 ms" in str(line.get_label()))
+        assert list(mark.get_xdata()) == [7.5, 7.5]
+
     def test_no_figure_module_runs_a_detector(self):
         for path in (REPO / "report").glob("*.py"):
             for node in ast.walk(ast.parse(path.read_text())):
@@ -274,7 +294,7 @@ class TestDiagnosisFigures:
                  "nonlinearity_finding": "input-nonlinearity", "disturbance_finding": "periodic-disturbance",
                  "input_noise_finding": "input-noise", "clock_drift_finding": "clock-drift",
                  "time_variation_finding": "time-variation", "dynamics_findings": ("resonance", "highpass", "lowpass"),
-                 "under_modelled_finding": "under-modelled"}
+                 "tail_finding": "reverberant-tail", "under_modelled_finding": "under-modelled"}
         effects = set()
         for detector in DETECTORS:
             named = names[detector.__name__]

@@ -13,7 +13,7 @@ from sysid.refine import NOT_REFINABLE, REFINE_EFFECTS, _correction_rank, parse_
 from sysid.simulate import SIMULATED_EFFECTS, random_effect
 
 BUILT_IN = ["dc-offset", "clipping", "resonance", "highpass", "lowpass", "delay", "input-nonlinearity",
-            "periodic-disturbance", "input-noise", "clock-drift", "time-variation", "under-modelled"]
+            "periodic-disturbance", "input-noise", "clock-drift", "time-variation", "reverberant-tail", "under-modelled"]
 
 
 def test_the_built_in_effects_are_design_md_s_vocabulary():
@@ -48,7 +48,10 @@ def test_detectors_run_after_what_they_need():
         for need in effect.needs:
             assert position[need] < position[effect.name] or effects.get(need).detect is effect.detect
         if effect.needs_all:
-            assert position[effect.name] == len(order) - 1
+            # After every detector that reads only what it needs; among those that read every finding, under-modelled
+            # (what nothing named explains) last.
+            assert all(position[effect.name] > position[e.name] for e in effects.effects() if not e.needs_all)
+    assert order[-1] is effects.get("under-modelled").detect
 
 
 def test_registration_is_checked():
