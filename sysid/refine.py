@@ -138,15 +138,19 @@ def _complete(spec: EffectSpec, model, noise, sweeps, before, transient_s) -> di
 
 
 def refine(model: Model, noise: Recording, sweeps: list[Recording], effect, options: IdentificationOptions | None = None,
-           transient_s: float = TRANSIENT_S, before: Comparison | None = None, max_order: int | None = None) -> Refinement:
+           transient_s: float = TRANSIENT_S, before: Comparison | None = None, max_order: int | None = None,
+           progress=None) -> Refinement:
     """Add one effect's structure (``"delay:23"``, an ``EffectSpec``, ...) and re-identify, holding the model to
-    the state cap (``state_cap``)."""
+    the state cap (``state_cap``). ``progress(text)``, when given, is told when the refit starts (after the
+    step's parameters are checked, so a refused step prints nothing else)."""
     spec = effect if isinstance(effect, EffectSpec) else parse_refinement(effect)
     if spec.kind not in REFINE_EFFECTS:
         raise IdentificationError(f"--add {spec.kind}: {NOT_REFINABLE.get(spec.kind, 'not a model structure')}")
     cap = state_cap(model, max_order)
     before = before or compare(model, sweeps)
     params = held_to_cap(spec.kind, _complete(spec, model, noise, sweeps, before, transient_s), model, cap)
+    if progress is not None:
+        progress(f"adding {spec.kind} and refitting")
     effect = registry.get(spec.kind)
     refined, extra = effect.build(model, noise, sweeps, params, options, transient_s)
     if cap is not None and refined.order > max(cap, model.order):

@@ -50,8 +50,7 @@ def run(args) -> int:
         steps = []
         for spec in specs:
             with busy("refine", args.quiet) as step:
-                step(f"adding {spec.kind} and refitting")
-                result = refine(model, noise, sweeps, spec, max_order=max_order)
+                result = refine(model, noise, sweeps, spec, max_order=max_order, progress=step)
             steps.append(result.step)
             model = result.model
             if result.step.worse:
