@@ -16,6 +16,7 @@ import numpy as np
 from ..core.thresholds import SKIP_S
 from ..io.lines import LINE_RATIO, driven, fit_sinusoids
 from . import DiagnosisContext, finding, noise_prediction, uses
+from .data_quality import session_line_search  # noqa: F401  (the provider of the shared value session-lines)
 from .dynamics import factor_residual, has_series_factor, within_resonance
 
 __all__ = ["disturbance_finding"]
