@@ -28,7 +28,7 @@ PATHS = ("fb", "ff")
 _REQUIRED_KEYS = ("format", "path", "fs", "A", "B", "C", "D")
 # Sane limits of a helmet sound path (issue 12, "absurd sizes"): beyond them a model is a
 # corrupt or hand-edited file, and simulating it would take minutes and gigabytes.
-MAX_ORDER = 200            # states; identification's grid stops at 20, refinement adds a few
+MAX_ORDER = 1000           # states; measured responses need hundreds (identify's long route, issue 25)
 MAX_DELAY_S = 1.0          # seconds of pure delay: 340 m of sound path
 MAX_COEFFICIENT = 1e8      # largest |entry| of A, B, C, D
 MAX_FS = 1e6               # Hz
