@@ -151,7 +151,8 @@ def identification_summary(result: Identification) -> str:
                      f"order {long['order']} by {long['refinement']}")
     lines += order_curve_lines(info)
     kind = {"long route": "long route"}.get(info.get("route"), "refined" if info["refined"] else "seed grid")
-    lines.append(f"  chosen model     : {kind}, gamma {info['gamma']}, order {model.order}, rms {info['rms']:.3e} FS, "
+    gamma = "" if info.get("route") == "long route" else f"gamma {info['gamma']}, "
+    lines.append(f"  chosen model     : {kind}, {gamma}order {model.order}, rms {info['rms']:.3e} FS, "
                  f"noise floor {result.noise_floor:.3e} FS, {'stable' if model.stable else 'UNSTABLE'} "
                  f"(largest pole radius {model.spectral_radius:.6f})")
     return "\n".join(lines)

@@ -5,6 +5,21 @@ at one sample rate, optionally with a disturbance model (sinusoids at given
 frequencies) that explains part of a measured ear signal but is not part of the
 plant. ``history`` records every refinement; ``identification`` how the model was
 obtained (estimator, gamma, order, validation figures).
+
+``identification`` keys of ``sysid.identify`` besides those (issue 25; all optional when reading):
+``max_order`` the user's cap on the states (None: the lowest order at the noise floor);
+``route`` the route that made the model ("order search", "long route" or "seed grid") and
+``routes`` every route tried (route, order, validation rms in FS, its ratio to the floor);
+``long_route`` how the long route made it (FIR taps, the response's length in taps and ms,
+the delay's leading taps, order, refinement, the orders tried and their rms over the floor)
+and ``long_estimate`` the long FIR behind the curve; ``order_curve`` the order/error/cost
+trade-off: ``orders``, their validation ``rms`` (FS) and ``ratio`` to the ``noise_floor``, the
+frequency-limited ``hankel_singular_values`` sigma_(n+1) / sigma_1 indexed by n, the board
+cost of each order (``sections``, emulated Cortex-M4 instructions per sample ``q15_block`` and
+``q15_step``: ``sysid.core.board``), the refined models' ``refined_orders``, ``refined_rms``
+and ``refined_ratio``, the ``chosen`` order and the curve's ``source``; ``capped`` (only when
+the cap stopped the model above the floor) its ``max_order``, the model's ``ratio``, the
+``floor_order`` the data ask for, its ``floor_ratio`` and ``floor_instructions`` per sample.
 """
 
 from __future__ import annotations
