@@ -24,32 +24,37 @@ NAMES = ("fabian_left_az60", "hptf_hd600_left")
 
 class _TrueTruncation:
     """Balanced truncation of an FIR's shift realisation (controllability Gramian I, observability Gramian
-    H^T H, H the Hankel matrix of taps 1..L-1: Kung 1978), each order's validation rms on the sweeps."""
+    H^T H, H the Hankel matrix of taps 1..L-1: Kung 1978), each order's validation rms on the sweeps, from its
+    impulse response."""
 
     def __init__(self, taps: np.ndarray, spectra):
         self.taps, self.spectra = taps, spectra
         h = taps[1:]
         m = h.size
         index = np.add.outer(np.arange(m), np.arange(m))
-        hankel = np.where(index < m, h[np.minimum(index, m - 1)], 0.0)
-        _, s, vt = np.linalg.svd(hankel)
-        self.s, self.v = s, vt.T
+        # H is symmetric: its eigenvectors are its right singular vectors, |eigenvalues| its singular values.
+        values, vectors = np.linalg.eigh(np.where(index < m, h[np.minimum(index, m - 1)], 0.0))
+        order = np.argsort(-np.abs(values))
+        self.s, self.v = np.abs(values[order]), vectors[:, order]
         self.measured = {}
 
     def impulse(self, n: int) -> np.ndarray:
-        """The order-n truncation's impulse response, 4 times the taps long (taps[0] is its direct term)."""
+        """The order-n truncation's impulse response, 4 times the taps long (taps[0] its direct term): blocks of 64
+        samples at a time, X_(j+1) = A^64 X_j."""
         v, root = self.v[:, :n], np.sqrt(self.s[:n])
-        m = self.v.shape[0]
-        shift = np.eye(m, k=-1)
-        A = (v.T @ shift @ v) * root[:, None] / root[None, :]
-        B = root * v[0]
-        C = (self.taps[1:] @ v) / root
-        out = np.zeros(4 * self.taps.size)
-        out[0], x = self.taps[0], B.copy()
-        for k in range(1, out.size):
-            out[k] = C @ x
-            x = A @ x
-        return out
+        shifted = np.vstack((np.zeros((1, n)), v[:-1]))
+        A = (v.T @ shifted) * root[:, None] / root[None, :]
+        B, C = root * v[0], (self.taps[1:] @ v) / root
+        block = np.empty((n, 64))
+        block[:, 0] = B
+        for k in range(1, 64):
+            block[:, k] = A @ block[:, k - 1]
+        power = np.linalg.matrix_power(A, 64)
+        blocks = [C @ block]
+        while 64 * len(blocks) < 4 * self.taps.size:
+            block = power @ block
+            blocks.append(C @ block)
+        return np.concatenate(([self.taps[0]], np.concatenate(blocks)))
 
     def rms(self, n: int) -> float:
         if n not in self.measured:
@@ -57,9 +62,13 @@ class _TrueTruncation:
         return self.measured[n]
 
     def order_at(self, limit: float, top: int) -> int:
-        """The lowest order whose validation rms is at most ``limit`` (FS), by bisection below ``top``."""
-        low, high = 0, top
+        """The lowest order whose validation rms is at most ``limit`` (FS): doubling from 16, then bisection."""
+        top = min(top, int(np.sum(self.s > 1e-12 * self.s[0])))
+        high = 16
+        while high < top and self.rms(high) > limit:
+            high = min(2 * high, top)
         assert self.rms(high) <= limit
+        low = high // 2 if high > 16 else 0
         while high - low > 1:
             middle = (low + high) // 2
             low, high = (low, middle) if self.rms(middle) <= limit else (middle, high)
