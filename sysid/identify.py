@@ -168,7 +168,7 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
     seconds["spectra"] = time.perf_counter() - t0
 
-    grid = grid_search(spectra, sweep_spectra, options.band, options.gammas, options.orders,
+    grid = grid_search(spectra, sweep_spectra, options.band, options.gammas, route.grid_orders(options),
                        feedthrough=options.feedthrough, progress=progress)
     seconds.update(grid.stage_seconds)
 

@@ -36,7 +36,7 @@ from ..core.errors import IdentificationError
 from ..core.thresholds import DEFAULT_ORDERS, SEARCH_MAX_ORDER, SEARCH_SHORT_ORDER
 from .long_route import LongEstimate
 
-__all__ = ["ROUTES", "check_route", "wants_long", "wants_search", "search_orders_of", "ladder_orders",
+__all__ = ["ROUTES", "check_route", "wants_long", "wants_search", "search_orders_of", "grid_orders", "ladder_orders",
            "enough"]
 
 ROUTES = ("auto", "search", "long")
@@ -56,12 +56,17 @@ def _explicit(options) -> bool:
 
 
 def search_orders_of(options) -> tuple[int, ...]:
-    """The orders the order search tries: those given, or 1 .. SEARCH_MAX_ORDER under the cap."""
-    if _explicit(options):
-        return tuple(n for n in options.orders if options.max_order is None or n <= options.max_order) \
-            or (min(options.orders),)
+    """The orders the order search tries: those given within its reach (SEARCH_MAX_ORDER) and the cap, or
+    1 .. SEARCH_MAX_ORDER under the cap (orders given all beyond its reach are the long route's)."""
     top = SEARCH_MAX_ORDER if options.max_order is None else min(SEARCH_MAX_ORDER, options.max_order)
-    return tuple(range(1, top + 1))
+    given = tuple(n for n in options.orders if n <= top) if _explicit(options) else ()
+    return given or tuple(range(1, top + 1))
+
+
+def grid_orders(options) -> tuple[int, ...]:
+    """The seed grid's orders: those given within the order search's reach, else the seed's (a subspace fit of
+    hundreds of states has not the frequencies it needs: orders beyond SEARCH_MAX_ORDER are the long route's)."""
+    return tuple(n for n in options.orders if n <= SEARCH_MAX_ORDER) or DEFAULT_ORDERS
 
 
 def ladder_orders(options) -> int | None:

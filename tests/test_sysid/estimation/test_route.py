@@ -27,6 +27,10 @@ def test_the_search_orders_stay_under_the_cap():
     assert route.search_orders_of(IdentificationOptions()) == tuple(range(1, SEARCH_MAX_ORDER + 1))
     assert route.search_orders_of(IdentificationOptions(max_order=6)) == tuple(range(1, 7))
     assert route.search_orders_of(IdentificationOptions(orders=(8, 9, 10), max_order=9)) == (8, 9)
+    # Orders beyond the search's reach are the long route's: the search and the seed grid keep to their own.
+    assert route.search_orders_of(IdentificationOptions(orders=(600,))) == tuple(range(1, SEARCH_MAX_ORDER + 1))
+    assert max(route.grid_orders(IdentificationOptions(orders=(600,)))) <= SEARCH_MAX_ORDER
+    assert route.grid_orders(IdentificationOptions(orders=(8, 9, 600))) == (8, 9)
 
 
 def test_given_orders_within_the_search_skip_the_long_estimate():
