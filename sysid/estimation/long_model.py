@@ -49,6 +49,9 @@ def long_model(estimate: LongEstimate, noise: Recording | RecordingFile, sweeps:
     if tuple(options.orders) != DEFAULT_ORDERS:
         # Orders given (a refit's re-identification at the model's own order and a few above): within them.
         order = min(max(order, min(options.orders)), max(options.orders))
+    # No more states than the truncation holds: the frequency-limited Gramians' numerical rank (the HD 600's FIR of
+    # 1980 taps: 473); orders above it would add states the data do not determine.
+    order = min(order, estimate.truncation.max_order)
     body = noise.trimmed(options.transient_s)
     body = body.advanced(estimate.line) if isinstance(body, RecordingFile) else compensate_delay(body, estimate.line)
     body = without_lines(body.head(max(options.refine_seconds, options.scan_seconds)), lines)
@@ -72,6 +75,7 @@ def long_model(estimate: LongEstimate, noise: Recording | RecordingFile, sweeps:
                 method="long route: least-squares FIR, its frequency-limited balanced truncation, then "
                        + _REFINEMENTS[core.refinement],
                 long_route=dict(estimate.to_dict(), order=core.order, refinement=core.refinement,
+                                most_states=estimate.truncation.max_order,
                                 reflected_poles=core.reflected, block_seconds=LONG_OE_SECONDS, reduced=removed,
                                 tried={str(n): round(float(r) / floor, 4) for n, r in core.tried.items()}))
     model = Model(path=path, fs=noise.fs, A=system[0], B=system[1], C=system[2], D=system[3], delay=estimate.line,
