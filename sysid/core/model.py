@@ -11,7 +11,9 @@ obtained (estimator, gamma, order, validation figures).
 ``route`` the route that made the model ("order search", "long route" or "seed grid") and
 ``routes`` every route tried (route, order, validation rms in FS, its ratio to the floor);
 ``long_route`` how the long route made it (FIR taps, the response's length in taps and ms,
-the delay's leading taps, order, refinement, the orders tried and their rms over the floor)
+the delay's leading taps, order, refinement, the most states its truncation holds ``most_states``, ``dropped`` the order given
+that validated worse than the floor's order and its ratio,
+the orders tried and their rms over the floor)
 and ``long_estimate`` the long FIR behind the curve; ``order_curve`` the order/error/cost
 trade-off: ``orders``, their validation ``rms`` (FS) and ``ratio`` to the ``noise_floor``, the
 frequency-limited ``hankel_singular_values`` sigma_(n+1) / sigma_1 indexed by n, the board
