@@ -24,6 +24,7 @@ from sysid.core.thresholds import TRANSIENT_S
 from . import diagnosis_figures as diag
 from . import identification_figures as ident
 from . import model_figures as modelfig
+from . import order_figures as orderfig
 from . import validation_figures as valid
 from .data import ReportData, prepare_report_data
 from .tables import findings_table, hankel_table, history_table, matrices_html, sections_table, summary_table
@@ -137,7 +138,13 @@ def _model_figures(data: ReportData) -> list[ReportFigure]:
                      f"{'justified' if decay < -60 else 'NOT justified: the slowest mode is still ringing'} "
                      "(criterion: below -60 dB).",
                      lambda dpi: modelfig.impulse_response_figure(model, data.transient_s, dpi=dpi)),
-    ]
+    ] + ([ReportFigure("order-curve", "model",
+                       "The order/error/cost trade-off identify found (from the model's provenance): top, the "
+                       "validation rms on the sweeps over the noise floor of each order (circles: models refined at "
+                       "that order; red: the order chosen); bottom, how much of the response the states beyond n hold "
+                       "(Hankel singular values) and what a model of n states costs the board per sample.",
+                       lambda dpi: orderfig.order_curve_figure(model, dpi=dpi))]
+         if orderfig.has_order_curve(model) else [])
 
 
 def _validation_figures(data: ReportData) -> list[ReportFigure]:

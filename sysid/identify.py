@@ -40,16 +40,21 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .core import lti
+from .core.board import board_cost
 from .core.errors import IdentificationError
 from .core.model import PATHS, Model
-from .core.thresholds import (DEFAULT_GAMMAS, DEFAULT_ORDERS, IDENTIFICATION_BAND, MIN_GAIN, ORDER_AT_FLOOR,
-                              SETTLE_DROPS, START_GAMMAS, TRANSIENT_S)
+from .core.thresholds import (DEFAULT_GAMMAS, DEFAULT_ORDERS, IDENTIFICATION_BAND, MIN_GAIN,
+                              ORDER_AT_FLOOR, SETTLE_DROPS, START_GAMMAS, TRANSIENT_S, UNCERTAINTY_MAX_ORDER)
+from .estimation import route
 from .estimation.delay import LatencyEstimate, TrialOptions, compensate_delay, estimate_latency, moved_delay
 from .estimation.grid import GridResult, grid_search
+from .estimation.long_model import long_model
+from .estimation.long_route import LongEstimate, fir_band, long_estimate
+from .estimation.order_curve import OrderCurve
 from .estimation.order_search import OrderCandidate, search_orders, sweep_rms, without_freed_pole
 from .estimation.output_error import block_data, refine_output_error
 from .estimation.reduction import Reduced, without_degenerate_states
-from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, smoothed_response
+from .estimation.spectra import ESTIMATORS, Spectra, estimate_spectra, response, smoothed_response
 from .estimation.subspace import SubspaceDecomposition
 from .estimation.uncertainty import frequency_response_band
 from .io.lines import undriven_lines, without_lines
@@ -77,11 +82,14 @@ class IdentificationOptions:
     # Estimate the pure delay first and fit the core on delay-compensated data.
     latency: bool = True
     max_delay: int = 400
-    # The order search tries every order up to max_order unless the validation rms reaches
-    # at_floor times the noise floor first; it picks the lowest order within min_gain of the best.
-    max_order: int = 30
+    # The user's cap on the model's states (what the board can afford), None: the lowest order at the noise floor
+    # the data allow. The order search tries every order up to SEARCH_MAX_ORDER (and the cap) unless the validation rms
+    # reaches at_floor times the noise floor first; every route picks the lowest order within min_gain of the best.
+    max_order: int | None = None
     at_floor: float = ORDER_AT_FLOOR
     min_gain: float = MIN_GAIN
+    # "auto" (sysid.estimation.route decides), "search" (the order search only) or "long" (the long route only).
+    route: str = "auto"
 
 
 @dataclass
@@ -104,6 +112,7 @@ def _check_inputs(noise: Recording, sweeps: list[Recording], options: Identifica
     """Checks the inputs; returns the lag (samples) aligning the second sweep to the first."""
     if options.estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator must be one of {', '.join(ESTIMATORS)}; found {options.estimator!r}")
+    route.check_route(options)
     if len(sweeps) != 2:
         raise IdentificationError(f"need exactly two validation sweeps; found {len(sweeps)}")
     check_same_rate([noise, *sweeps])
@@ -160,7 +169,7 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     sweep_spectra = [sweep_spectrum(s, options.validation_band) for s in core_sweeps]
     seconds["spectra"] = time.perf_counter() - t0
 
-    grid = grid_search(spectra, sweep_spectra, options.band, options.gammas, options.orders,
+    grid = grid_search(spectra, sweep_spectra, options.band, options.gammas, route.grid_orders(options),
                        feedthrough=options.feedthrough, progress=progress)
     seconds.update(grid.stage_seconds)
 
@@ -177,6 +186,7 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
                  "candidates": int(grid.rms.size), "stable": int(np.isfinite(grid.rms).sum())},
         "seed_choice": {"gamma": chosen.gamma, "order": chosen.order},
         "noise_floor": floor,
+        "max_order": options.max_order,
     }
     if lines:
         provenance["sweep_lines_hz"] = [round(float(f), 3) for f in lines]
@@ -187,26 +197,38 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
     seed_rms = simulated_rms(seed_model, sweeps, options.validation_band)
     provenance["seed_choice"]["rms"] = seed_rms
 
-    result_model, refined_rms, scan = seed_model, None, []
+    picked = _Candidate("seed grid", seed_model, seed_rms, body, latency)
+    refined_rms, scan, long = None, [], None
     if options.refine:
-        t0 = time.perf_counter()
-        # The band-limited kernel's lead (samples): how far short the onset may have read.
-        lead = latency.lead if latency else 0
-        result_model, refined_rms, scan, extra = _refine(_Behind(body, sweeps, sweep_spectra, delay, path, options),
-                                                         spectra, grid, floor, provenance, progress, lead)
-        seconds["refinement"] = time.perf_counter() - t0
-        if extra is not None and refined_rms < seed_rms:
-            # The model moved ``extra`` samples of its core into the delay line (sysid.estimation.delay.moved_delay).
-            body = compensate_delay(body, extra)
-            delay += extra
-            latency = dataclasses.replace(latency, samples=delay, refined_by=extra)
-            result_model.identification["latency"] = latency.to_dict()
-        if refined_rms >= seed_rms:
+        candidates = []
+        if route.wants_long(options):
+            t0 = time.perf_counter()
+            long = long_estimate(noise, sweeps, floor, options.band, options.validation_band, options.transient_s,
+                                 options.max_delay if options.latency else 0, options.feedthrough, options.at_floor,
+                                 options.min_gain, route.ladder_orders(options), options.route == "long")
+            seconds.update(long.seconds)
+            if long.held or options.route == "long":
+                t0 = time.perf_counter()
+                made = long_model(long, noise, sweeps, lines, floor, provenance, path, options)
+                moved = None if latency is None else dataclasses.replace(latency, samples=long.line, refined_by=None)
+                candidates.append(_Candidate("long route", made.model, made.rms, made.body, moved))
+                seconds["long route"] = time.perf_counter() - t0
+        first = candidates[0] if candidates else None
+        if route.wants_search(options, long, first and first.rms, first and first.model.order, floor):
+            t0 = time.perf_counter()
+            candidates.append(_search_candidate(_Behind(body, sweeps, sweep_spectra, delay, path, options), spectra,
+                                                grid, floor, provenance, progress, latency))
+            seconds["refinement"] = time.perf_counter() - t0
+        picked = _better(candidates, options.min_gain)
+        refined_rms, scan = picked.rms, picked.scan
+        if picked.rms >= seed_rms:
             # Keep the seed's choice, but say what the refinement tried and why it was dropped.
-            seed_model.identification["refinement"] = dict(result_model.identification["refinement"], rms=refined_rms,
+            seed_model.identification["refinement"] = dict(picked.model.identification.get("refinement", {}),
+                                                           rms=picked.rms,
                                                            rejected="validated worse than the seed grid's choice")
-            result_model = seed_model
-    final_rms = seed_rms if result_model is seed_model else refined_rms
+            picked = _Candidate("seed grid", seed_model, seed_rms, body, latency)
+        _record_routes(picked, candidates, long, floor, options)
+    result_model = picked.model
     # A model kept from the seed grid records its own gamma, not the one the rejected refinement started from.
     start_gamma = (chosen.gamma if result_model is seed_model
                    else result_model.identification.get("refinement", {}).get("start_gamma", chosen.gamma))
@@ -214,16 +236,93 @@ def _identify(noise, sweeps, path, options, progress) -> Identification:
         "gamma": start_gamma,
         "order": result_model.order,
         "delay": result_model.delay,
-        "rms": final_rms,
+        "rms": picked.rms,
         "noise_floor": floor,
         "refined": result_model is not seed_model,
     })
-    # The 95 % band of the returned model (sysid.estimation.uncertainty), from the delay-compensated noise block it was refined on.
+    # The 95 % band of the returned model (sysid.estimation.uncertainty), from the delay-compensated noise block it was
+    # refined on; above UNCERTAINTY_MAX_ORDER states, from the FIR the long route reduced (its covariance's cost).
     t0 = time.perf_counter()
     core = Model(path=path, fs=fs, A=result_model.A, B=result_model.B, C=result_model.C, D=result_model.D)
-    result_model.uncertainty = frequency_response_band(core, body, spectra, options.band, options.refine_seconds).to_dict()
+    if picked.route == "long route" and result_model.order > UNCERTAINTY_MAX_ORDER:
+        f = response(spectra, options.band).frequencies
+        result_model.uncertainty = fir_band(long, (core.A, core.B, core.C, core.D), f)
+    else:
+        result_model.uncertainty = frequency_response_band(core, picked.body, spectra, options.band,
+                                                           options.refine_seconds).to_dict()
     seconds["uncertainty"] = time.perf_counter() - t0
-    return Identification(result_model, grid, spectra, floor, seed_model, seed_rms, refined_rms, scan, seconds, latency)
+    return Identification(result_model, grid, spectra, floor, seed_model, seed_rms, refined_rms, scan, seconds,
+                          picked.latency)
+
+
+@dataclass
+class _Candidate:
+    """A model one route returned, its time-domain validation rms (FS), the noise block behind its delay (for its
+    95 % band), its delay's estimate and the order scan that found it (the order search's)."""
+
+    route: str
+    model: Model
+    rms: float
+    body: Recording
+    latency: LatencyEstimate | None
+    scan: list[dict] = field(default_factory=list)
+
+
+def _better(candidates: list[_Candidate], min_gain: float) -> _Candidate:
+    """The fewest states among the candidates within ``min_gain`` of the best validation rms (the order search's
+    rule between routes)."""
+    best = min(c.rms for c in candidates)
+    return min((c for c in candidates if c.rms <= best * (1 + min_gain)), key=lambda c: (c.model.order, c.rms))
+
+
+def _search_candidate(data: _Behind, spectra: Spectra, grid: GridResult, floor: float, provenance: dict, progress,
+                      latency: LatencyEstimate | None) -> _Candidate:
+    """The order search's route (steps 4-6 of the module docstring) as a candidate."""
+    # The band-limited kernel's lead (samples): how far short the onset may have read.
+    lead = latency.lead if latency else 0
+    model, rms, scan, extra = _refine(data, spectra, grid, floor, dict(provenance, route="order search"), progress, lead)
+    body = data.body
+    if extra:
+        # The model moved ``extra`` samples of its core into the delay line (sysid.estimation.delay.moved_delay).
+        body = compensate_delay(body, extra)
+        latency = dataclasses.replace(latency, samples=data.delay + extra, refined_by=extra)
+    elif extra is not None and latency is not None:
+        latency = dataclasses.replace(latency, refined_by=0)
+    if latency is not None and extra is not None:
+        model.identification["latency"] = latency.to_dict()
+    return _Candidate("order search", model, rms, body, latency, scan)
+
+
+def _record_routes(picked: _Candidate, candidates: list[_Candidate], long: LongEstimate | None, floor: float,
+                   options: IdentificationOptions) -> None:
+    """The routes tried and the order/error/cost curve into the picked model's provenance (``sysid.core.model``)."""
+    info = picked.model.identification
+    info["route"] = picked.route
+    info["routes"] = [{"route": c.route, "order": c.model.order, "rms": c.rms, "ratio": round(c.rms / floor, 4)}
+                      for c in candidates]
+    scanned = {int(c["order"]): float(c["refined_rms"]) for c in picked.scan or next(
+        (c.scan for c in candidates if c.scan), [])}
+    if long is not None and long.curve is not None:
+        curve = long.curve
+        for n, r in scanned.items():
+            curve.refined[n] = min(r, curve.refined.get(n, np.inf))
+        info["long_estimate"] = long.to_dict()
+    elif scanned:
+        A, B, C = picked.model.A, picked.model.B, picked.model.C
+        hsv = lti.hankel_singular_values(A, B, C) if picked.model.stable else np.zeros(0)
+        curve = OrderCurve(sorted(scanned), [scanned[n] for n in sorted(scanned)], floor, hsv,
+                           "order search (output error from several starts per order)")
+    else:
+        return
+    curve.chosen = picked.model.order
+    info["order_curve"] = curve.to_dict()
+    cap = options.max_order
+    if cap is not None and long is not None and long.curve is not None:
+        needed = long.curve.lowest_at_floor(options.at_floor, options.min_gain)
+        if needed > picked.model.order and picked.rms > options.at_floor * floor * (1 + options.min_gain):
+            info["capped"] = {"max_order": cap, "ratio": round(picked.rms / floor, 4), "floor_order": needed,
+                              "floor_ratio": round(long.curve.ratio(needed), 4),
+                              "floor_instructions": board_cost(needed).step}
 
 
 def _decompositions(spectra: Spectra, grid: GridResult, band, feedthrough: bool, max_order: int):
@@ -309,8 +408,8 @@ def _order_search(data: _Behind, scan_block, spectra: Spectra, grid: GridResult,
     """(the best refined model of each order, ``order_search.search_orders`` on the scan block, and each order's
     best grid gamma)."""
     options = data.options
-    # Orders given explicitly are searched as given; the seed's default 1..20 widens to max_order.
-    orders = range(1, options.max_order + 1) if tuple(options.orders) == DEFAULT_ORDERS else options.orders
+    # Orders given explicitly are searched as given; the seed's default 1..20 widens to SEARCH_MAX_ORDER, under the cap.
+    orders = route.search_orders_of(options)
     decompositions, grid_gammas = _decompositions(spectra, grid, options.band, options.feedthrough, max(orders))
     candidates = search_orders(scan_block, data.sweep_spectra, decompositions, grid_gammas, orders, floor,
                                feedthrough=options.feedthrough, at_floor=options.at_floor, min_gain=options.min_gain,

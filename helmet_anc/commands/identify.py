@@ -9,7 +9,7 @@ from sysid.identify import IdentificationOptions, identify
 from sysid.io.recordings import open_recording
 
 from .common import (add_force_option, add_recording_options, check_output, check_report_target, identification_summary,
-                     load_sweeps)
+                     load_sweeps, parse_max_order)
 
 ORDER = 20
 
@@ -21,6 +21,8 @@ def register(commands) -> None:
     parser.add_argument("--estimator", choices=ESTIMATORS, default="h1")
     parser.add_argument("--gammas", default="10:1000:10", metavar="A:B:STEP", help="smoothing widths (default 10:1000:10)")
     parser.add_argument("--orders", default="1:20", metavar="A:B", help="model orders (default 1:20)")
+    parser.add_argument("--max-order", metavar="N",
+                        help="at most N states (what the board can afford); default: the lowest order at the noise floor")
     parser.add_argument("--no-refine", action="store_true", help="stop at the seed's grid choice")
     parser.add_argument("--feedthrough", action="store_true", help="estimate a direct term D (default D = 0)")
     parser.add_argument("--mat", metavar="FILE.mat", help="also export the model for MATLAB")
@@ -37,7 +39,7 @@ def run(args) -> int:
     report_target = check_report_target(args.report, args, args.path)
     options = IdentificationOptions(estimator=args.estimator, gammas=parse_range(args.gammas, "--gammas", True),
                                     orders=parse_range(args.orders, "--orders", False), refine=not args.no_refine,
-                                    feedthrough=args.feedthrough)
+                                    feedthrough=args.feedthrough, max_order=parse_max_order(args.max_order))
     # Read in blocks: a noise recording of any length is identified in bounded memory.
     noise = open_recording(args.noise, args.input_channel, args.output_channel)
     sweeps = load_sweeps(args)

@@ -10,7 +10,7 @@ from sysid.io.recordings import load_recording
 from sysid.refine import REFINE_EFFECTS, format_refinement, parse_refinement, refine, refine_auto
 
 from ..progress import busy
-from .common import add_force_option, add_recording_options, check_output, check_report_target, load_sweeps
+from .common import add_force_option, add_recording_options, check_output, check_report_target, load_sweeps, parse_max_order
 
 ORDER = 32
 
@@ -33,7 +33,7 @@ def register(commands) -> None:
 def run(args) -> int:
     if bool(args.add) == bool(args.auto):
         raise HelmetAncError("give --add EFFECT[:PARAMS] (repeatable) or --auto, not both")
-    max_order = _max_order(args.max_order)
+    max_order = parse_max_order(args.max_order)
     specs = [parse_refinement(text) for text in args.add]
     output = check_output(args.output, args)
     model = Model.load(args.model)
@@ -65,15 +65,3 @@ def run(args) -> int:
         print(f"wrote {write_report(report_target, model, noise, sweeps)}")
     return 0
 
-
-def _max_order(text: str | None) -> int | None:
-    """The --max-order value: a whole number of states, at least 1 (None when not given)."""
-    if text is None:
-        return None
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise HelmetAncError(f"--max-order must be a whole number of states of at least 1; found {text!r}")
-    return value

@@ -5,6 +5,23 @@ at one sample rate, optionally with a disturbance model (sinusoids at given
 frequencies) that explains part of a measured ear signal but is not part of the
 plant. ``history`` records every refinement; ``identification`` how the model was
 obtained (estimator, gamma, order, validation figures).
+
+``identification`` keys of ``sysid.identify`` besides those (issue 25; all optional when reading):
+``max_order`` the user's cap on the states (None: the lowest order at the noise floor);
+``route`` the route that made the model ("order search", "long route" or "seed grid") and
+``routes`` every route tried (route, order, validation rms in FS, its ratio to the floor);
+``long_route`` how the long route made it (FIR taps, the response's length in taps and ms,
+the delay's leading taps, order, refinement, the most states its truncation holds ``most_states``, ``dropped`` the order given
+that validated worse than the floor's order and its ratio,
+the orders tried and their rms over the floor)
+and ``long_estimate`` the long FIR behind the curve; ``order_curve`` the order/error/cost
+trade-off: ``orders``, their validation ``rms`` (FS) and ``ratio`` to the ``noise_floor``, the
+frequency-limited ``hankel_singular_values`` sigma_(n+1) / sigma_1 indexed by n, the board
+cost of each order (``sections``, emulated Cortex-M4 instructions per sample ``q15_block`` and
+``q15_step``: ``sysid.core.board``), the refined models' ``refined_orders``, ``refined_rms``
+and ``refined_ratio``, the ``chosen`` order and the curve's ``source``; ``capped`` (only when
+the cap stopped the model above the floor) its ``max_order``, the model's ``ratio``, the
+``floor_order`` the data ask for, its ``floor_ratio`` and ``floor_instructions`` per sample.
 """
 
 from __future__ import annotations
@@ -28,7 +45,7 @@ PATHS = ("fb", "ff")
 _REQUIRED_KEYS = ("format", "path", "fs", "A", "B", "C", "D")
 # Sane limits of a helmet sound path (issue 12, "absurd sizes"): beyond them a model is a
 # corrupt or hand-edited file, and simulating it would take minutes and gigabytes.
-MAX_ORDER = 1000           # states; a measured path's long tail needs hundreds (HD 600 on a KEMAR: about 350)
+MAX_ORDER = 1000           # states; measured responses need hundreds (HD 600 on a KEMAR: about 330; issue 25)
 MAX_DELAY_S = 1.0          # seconds of pure delay: 340 m of sound path
 MAX_COEFFICIENT = 1e8      # largest |entry| of A, B, C, D
 MAX_FS = 1e6               # Hz

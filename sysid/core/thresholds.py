@@ -135,6 +135,55 @@ NEAR_REAL_PAIR = 1e-3
 NEAR_REAL_SPLIT = 0.1
 __all__ += ["AT_RADIUS_BOUND", "NEAR_REAL_PAIR", "NEAR_REAL_SPLIT"]
 
+# The long route (sysid.estimation.long_route: a least-squares FIR of the noise recording, its frequency-limited
+# balanced truncation to every order, then output error at the order chosen; sysid.estimation.long_response,
+# sysid.estimation.delay.fir). The FIR's length: the fewest taps whose least-squares FIR validates on the sweeps
+# within FIR_TAIL_SHARE of the noise floor's power of the best length's (the validation rms within half that share),
+# found among FIR_LENGTHS lengths spaced geometrically, then by bisection; estimates of FIR_FIRST_TAPS taps and up, at most FIR_MAX_TAPS, on at most FIR_SECONDS of the noise recording after
+# its transient. An estimate whose answer lies beyond FIR_HOLDS of its length does not hold the response.
+FIR_TAIL_SHARE = 0.01
+FIR_LENGTHS = 20
+FIR_FIRST_TAPS = 1024
+FIR_MAX_TAPS = 4096
+FIR_HOLDS = 0.75
+FIR_SECONDS = 20.0
+# The long route's delay (sysid.estimation.delay.fir): the largest whose leading taps the data cannot tell from
+# zero, by the chi-square test of the nested fits at this probability of calling zero taps a response.
+FIR_DELAY_SIGNIFICANCE = 1e-3
+__all__ += ["FIR_TAIL_SHARE", "FIR_LENGTHS", "FIR_FIRST_TAPS", "FIR_MAX_TAPS", "FIR_HOLDS", "FIR_SECONDS", "FIR_DELAY_SIGNIFICANCE"]
+# The order/error curve (sysid.estimation.order_curve): the truncation ladder's orders, every one up to 12 and then a
+# factor LADDER_STEP apart, validated on the sweeps' spectra in cells of at most LADDER_CELL_HZ and 1 / LADDER_CELLS
+# of the FIR's resolution; the walk up ends after LADDER_PATIENCE orders without a gain of LADDER_GAIN (relative)
+# once within LADDER_NEAR times the noise floor; the lowest order at the floor is found to within LADDER_RESOLUTION.
+LADDER_STEP = 1.15
+LADDER_CELL_HZ = 2.0
+LADDER_CELLS = 40
+LADDER_RESOLUTION = 0.02
+LADDER_PATIENCE = 3
+LADDER_GAIN = 0.01
+LADDER_NEAR = 2.0
+__all__ += ["LADDER_STEP", "LADDER_CELL_HZ", "LADDER_CELLS", "LADDER_PATIENCE", "LADDER_GAIN", "LADDER_NEAR",
+            "LADDER_RESOLUTION"]
+# The long route's refinement at the order chosen (sysid.estimation.long_route.refine_long): output error up to
+# LONG_OE_ORDER states (above it one linear step, the numerator with the truncation's poles held), LONG_OE_ITERATIONS
+# evaluations of a block of LONG_OE_SECONDS of the noise recording. Measured on the HD 600's short session (2 s block,
+# 30 evaluations, 2 busy cores): 1.3 s at 30 states, 3.8 s at 60, 9.8 s at 100 and 150 s at 333, where it validated
+# worse than the truncation it started from (1.25x against 1.09x).
+LONG_OE_ORDER = 60
+LONG_OE_ITERATIONS = 30
+LONG_OE_SECONDS = 2.0
+__all__ += ["LONG_OE_ORDER", "LONG_OE_ITERATIONS", "LONG_OE_SECONDS"]
+# The order search's highest order when the caller gives none (sysid.estimation.route): beyond it the long route.
+# A long-route model of at most SEARCH_SHORT_ORDER states is a short plant's: the order search runs beside it, up to
+# its order, and the fewer states at the floor win.
+SEARCH_MAX_ORDER = 30
+SEARCH_SHORT_ORDER = 12
+# Above this many states a long-route model's 95 % band comes from its FIR (sysid.estimation.long_route.fir_band), not
+# from the output-error covariance (sysid.estimation.uncertainty), whose cost grows with the square of the parameters:
+# 5.5-7.7 s of CPU at 333 states on a 1-2 s block.
+UNCERTAINTY_MAX_ORDER = 60
+__all__ += ["SEARCH_MAX_ORDER", "SEARCH_SHORT_ORDER", "UNCERTAINTY_MAX_ORDER"]
+
 
 
 # ---------------------------------------------------------------------------------------------------------------------

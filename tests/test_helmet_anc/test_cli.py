@@ -164,3 +164,18 @@ def test_output_into_a_closed_pipe_ends_quietly(command, tmp_path):
     assert process.wait(timeout=300) == EXIT_BROKEN_PIPE, err
     assert err == ""
     assert (tmp_path / "fw" / "manifest.json").is_file()  # written whole before anything was printed
+
+
+@pytest.mark.parametrize("value", ["0", "-4", "2.5", "many"])
+def test_identify_refuses_a_bad_max_order(session_files, tmp_path, capsys, value):
+    code, _, err = _run(capsys, *_identify_args(session_files, tmp_path / "m.json", "--max-order", value))
+    _assert_one_line_error(code, err, "--max-order must be a whole number of states")
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_identify_keeps_the_model_under_max_order_and_prints_the_curve(session_files, tmp_path, capsys):
+    code, out, err = _run(capsys, *_identify_args(session_files, tmp_path / "m.json", "--max-order", "3"))
+    assert code == 0, err
+    model = Model.load(tmp_path / "m.json")
+    assert model.order <= 3 and model.identification["max_order"] == 3
+    assert "order/error/cost" in out and "*" + str(model.order) in out

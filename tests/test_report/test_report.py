@@ -20,7 +20,7 @@ from sysid.simulate import simulate_session, write_session
 
 # The figures every report has (seed figures, validation, refinement), in page order.
 FIXED_FIGURES = ["averaged-spectra", "smoothed-estimates", "singular-values", "rms-grid", "model-bode", "pole-zero",
-                 "impulse-response", "sweep-1", "sweep-2", "error-bands", "residual-correlation", "coherence",
+                 "impulse-response", "order-curve", "sweep-1", "sweep-2", "error-bands", "residual-correlation", "coherence",
                  "refinement"]
 DPI = 40
 
