@@ -73,4 +73,10 @@ def test_update_rewrites_only_the_output_blocks():
     new = readme_examples.updated_readme(text, {blocks[0].line: "hi\nthere\n"})
     assert new == "intro\n\n```sh\necho hi\n```\n\n```text\nhi\nthere\n```\n\n```\nnot an example\n```\n"
     assert readme_examples.differences("took 3.2 s wall\n", "took 4.0 s wall\n") == []
-    assert readme_examples.differences("rms 1.0e-3\n", "rms 1.1e-3\n")
+    # Figures are measurements: within 5 % or a unit of the last printed digit they agree; integers and words
+    # must agree exactly.
+    assert readme_examples.differences("rms 1.0e-3\n", "rms 1.1e-3\n") == []
+    assert readme_examples.differences("rms 1.00e-3\n", "rms 1.10e-3\n")
+    assert readme_examples.differences("12.72x the floor\n", "12.90x the floor\n") == []
+    assert readme_examples.differences("order 16\n", "order 17\n")
+    assert readme_examples.differences("refined\n", "rejected\n")

@@ -6,18 +6,33 @@ import dataclasses
 from helmet_anc.commands.common import identification_summary
 
 
-def test_a_reduction_after_the_order_search_is_said(identifications):
-    result = identifications["ff"]
+def _from_the_search(result):
+    """``result`` with its model's provenance as the order search writes it (the route that reduces)."""
     model = copy.deepcopy(result.model)
-    model.identification["refinement"] = dict(model.identification["refinement"], order=model.order + 1,
+    info = model.identification
+    info.update(route="order search", refined=True)
+    info["refinement"] = dict(info.get("refinement", {}), order=model.order, start_gamma=info["gamma"])
+    return dataclasses.replace(result, model=model)
+
+
+def test_a_reduction_after_the_order_search_is_said(identifications):
+    result = _from_the_search(identifications["ff"])
+    model = result.model
+    model.identification["refinement"].update(order=model.order + 1,
                                               reduced="1 state of negligible Hankel singular value left out")
-    summary = identification_summary(dataclasses.replace(result, model=model))
+    summary = identification_summary(result)
     chosen = next(line for line in summary.splitlines() if "chosen model" in line)
     assert (f"order {model.order} (reduced from {model.order + 1}: 1 state of negligible Hankel singular value "
             "left out)") in chosen
 
 
 def test_no_reduction_no_note(identifications):
-    result = identifications["ff"]
-    assert result.model.identification["refinement"]["order"] == result.model.order
-    assert "reduced from" not in identification_summary(result)
+    for result in (identifications["ff"], _from_the_search(identifications["ff"])):
+        assert "reduced from" not in identification_summary(result)
+
+
+def test_the_route_is_named(identifications):
+    for result in identifications.values():
+        chosen = next(line for line in identification_summary(result).splitlines() if "chosen model" in line)
+        route = result.model.identification.get("route")
+        assert ("long route" in chosen) == (route == "long route")

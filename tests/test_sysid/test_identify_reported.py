@@ -2,6 +2,7 @@
 feed-forward session with a delay, hum and a saturating input. The refinement's start label carried its gamma as
 text ("grid gamma=820, walked" once the delay was walked) and was parsed back; the gamma is data now."""
 
+import dataclasses
 import importlib
 import json
 
@@ -16,6 +17,9 @@ from sysid.identify import identify
 from sysid.random_plant import _continuous_statespace, _zoh_modal
 from sysid.simulate import SessionSpec, simulate_session
 
+# The order search's route (sysid.estimation.route): where the gamma and the walked delay's labels are made.
+SEARCH = dataclasses.replace(FAST_OPTIONS, route="search")
+
 # Three modes (Hz, Q, signed peak gain) behind a 4.1 kHz roll-off and 9 samples of delay, at 48 kHz.
 HELMET_48K = [(1254.0, 5.9, 0.48), (2027.0, 2.6, 0.45), (2483.0, 14.8, -0.49)]
 
@@ -29,7 +33,7 @@ def test_the_48_khz_helmet_is_identified_at_the_floor_with_its_gamma_as_data():
     spec = SessionSpec(path="fb", seed=5, fs=48000.0, output_noise=1.4e-4, noise_duration=8.0, sweep_duration=2.0,
                        sweep_silence=0.2)
     session = simulate_session(spec, plant=helmet_48k())
-    result = identify(session.noise, session.sweeps, "fb", FAST_OPTIONS)
+    result = identify(session.noise, session.sweeps, "fb", SEARCH)
     info = result.model.identification
     assert info["rms"] < 1.1 * result.noise_floor
     assert abs(result.model.delay - 9) <= 2
@@ -73,7 +77,7 @@ def test_a_model_kept_from_the_seed_grid_records_its_own_gamma(sessions, monkeyp
         return model, np.inf, [], None
 
     monkeypatch.setattr(pipeline, "_refine", worse)
-    result = identify(session.noise, session.sweeps, "ff", FAST_OPTIONS)
+    result = identify(session.noise, session.sweeps, "ff", SEARCH)
     info = result.model.identification
     assert result.model is result.seed_model and not info["refined"]
     assert info["gamma"] == result.grid.chosen.gamma == info["seed_choice"]["gamma"]
@@ -96,7 +100,7 @@ def test_the_labels_a_walked_delay_produces_are_never_read_for_the_gamma(label, 
 
     monkeypatch.setattr(pipeline, "_settle", walked)
     session = sessions["ff"]
-    result = identify(session.noise, session.sweeps, "ff", FAST_OPTIONS)
+    result = identify(session.noise, session.sweeps, "ff", SEARCH)
     info = result.model.identification
     assert info["refinement"]["start"] == label and info["refinement"]["start_gamma"] == 820
     assert info["gamma"] == (820 if info["refined"] else result.grid.chosen.gamma)
