@@ -7,12 +7,18 @@ The finding is significant when the harmonic columns explain enough of the resid
 For u = A sin, a2 u^2 gives a second harmonic a2 A/2 and a3 u^3 a third a3 A^2/4
 relative to the fundamental; the levels are stated for A the session's largest input
 amplitude (noise recording and sweeps), as ``simulate --effect input-nonlinearity`` gives them.
+
+On exponential sweeps the harmonics are also measured directly (Farina's separation,
+``sysid.estimation.input_nonlinearity.sweep_harmonics``) and set beside the model's own at the sweeps'
+amplitude: ``measured_h2_db``/``measured_h3_db`` and ``model_h2_db``/``model_h3_db`` in the params, the
+levels against the sweep's frequency in the evidence (the diagnosis figure draws them).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..estimation.input_nonlinearity import harmonic_levels, sweep_harmonics
 from ..estimation.input_polynomial import input_polynomial
 from . import DiagnosisContext, finding, uses
 from .dynamics import has_series_factor, with_series_factor
@@ -46,7 +52,16 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     explanation = (f"the residual follows u^2 and u^3 through the path: second harmonic {h2:.1f} dB and third "
                    f"{h3:.1f} dB at the session's largest input {amplitude:.3g} FS (headphone Bl(x)/Kms(x) or amplifier); "
                    f"they explain {100 * explained:.0f} % of the remaining error")
-    return finding("input-nonlinearity", significant, score,
-                   {"a2": a2, "a3": a3, "h2_db": h2, "h3_db": h3, "amplitude_fs": amplitude},
-                   explanation, "refine --add input-nonlinearity:3",
-                   {"explained_fraction": explained, "chi2": chi2})
+    params = {"a2": a2, "a3": a3, "h2_db": h2, "h3_db": h3, "amplitude_fs": amplitude}
+    evidence = {"explained_fraction": explained, "chi2": chi2}
+    measured = sweep_harmonics(ctx.sweeps)
+    if measured is not None:
+        model = harmonic_levels(ctx.model.apply_input_nonlinearity, measured.amplitude)
+        params.update(sweep_amplitude_fs=measured.amplitude, measured_h2_db=measured.levels_db[2],
+                      measured_h3_db=measured.levels_db[3], model_h2_db=model[2], model_h3_db=model[3])
+        evidence.update(harmonic_frequencies_hz=measured.frequencies_hz, measured_h2_curve_db=measured.curves_db[2],
+                        measured_h3_curve_db=measured.curves_db[3])
+        explanation += (f"; on the sweeps (amplitude {measured.amplitude:.3g} FS) H2 {measured.levels_db[2]:.1f} dB and "
+                        f"H3 {measured.levels_db[3]:.1f} dB measured, the model's {model[2]:.1f} and {model[3]:.1f} dB")
+    return finding("input-nonlinearity", significant, score, params, explanation,
+                   "refine --add input-nonlinearity:7", evidence)
