@@ -121,8 +121,8 @@ def _tanh_columns(stretch: _Stretch, linear: Model, theta):
 
 
 def _tanh_fit(stretch: _Stretch, linear: Model, starts):
-    """(form, gain of the linear part, mean-square error) of the saturation by Gauss-Newton over (s, o), the
-    gain by least squares at every step (variable projection); the best of ``starts``."""
+    """(form, gain of the linear part, mean-square error, parameters) of the saturation by Gauss-Newton over
+    (s, o), the gain by least squares at every step (variable projection); the best of ``starts``."""
     def residual(theta):
         column, _ = _tanh_columns(stretch, linear, theta)
         g = float(column @ stretch.y) / max(float(column @ column), 1e-300)
@@ -135,7 +135,7 @@ def _tanh_fit(stretch: _Stretch, linear: Model, starts):
         error = float(np.mean(solution.fun**2))
         if best is None or error < best[2]:
             column, form = _tanh_columns(stretch, linear, solution.x)
-            best = (form, float(column @ stretch.y) / max(float(column @ column), 1e-300), error)
+            best = (form, float(column @ stretch.y) / max(float(column @ column), 1e-300), error, solution.x)
     return best
 
 
@@ -151,22 +151,28 @@ def _tanh_starts(fits, peak: float):
 
 
 def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
-                    band=IDENTIFICATION_BAND, max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS) -> HammersteinFit:
-    """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on the
-    first ``seconds`` of ``noise`` (the recording as the core sees it after its transient: the ear signal
-    without disturbance or offset, the input raw); see the module docstring. ``model``'s own input map is
-    replaced; its delay is kept, and its core is the start.
+                    core_seconds: float | None = None, band=IDENTIFICATION_BAND, max_degree: int = MAX_DEGREE,
+                    rounds: int = _ROUNDS) -> HammersteinFit:
+    """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on
+    ``noise`` (the recording as the core sees it after its transient: the ear signal without disturbance or
+    offset, the input raw); see the module docstring. The map is fitted on the first ``seconds``, the core
+    on the first ``core_seconds`` (default: ``seconds``; the frequency-domain step is cheap, and a core of
+    lightly damped modes needs the longer record). ``model``'s own input map is replaced; its delay is
+    kept, and its core is the start.
     """
     if kind not in ("polynomial", "tanh"):
         raise ValueError(f"kind must be polynomial or tanh; found {kind!r}")
     if model.order == 0:
         raise IdentificationError("a Hammerstein refinement needs a core of order at least 1")
     n = min(noise.u.size, int(round(seconds * noise.fs)))
-    u, y = noise.u[:n] - noise.u[:n].mean(), noise.y[:n] - noise.y[:n].mean()
+    # The input as recorded (the map acts on it so); the band-pass takes the ear signal's mean out.
+    u, y = noise.u[:n], noise.y[:n]
     stretch = _Stretch(u, y, noise.fs, band)
+    m = min(noise.u.size, int(round((core_seconds or seconds) * noise.fs)))
+    core_u, core_y = noise.u[:m], noise.y[:m]
     core = (model.A, model.B, model.C, model.D)
     cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(u))) ** 2))
-    history, coefficients, form, parameters, done = [], None, None, 0, 0
+    history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None
     for done in range(1, rounds + 1):
         # 1. The map with the core held (its gain moved into the core).
         linear = _linear(model, core)
@@ -175,18 +181,25 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
             degree = polynomial_degree(fits, stretch.effective)
             _, c, gain, error = fits[degree - 1]
             coefficients = [float(ck / stretch.peak ** (k - 1)) for k, ck in enumerate(c, start=1)]
-            parameters, mapped = degree - 1, np.polynomial.polynomial.polyval(u, [0.0, *coefficients])
+            parameters = degree - 1
         else:
-            form, gain, error = _tanh_fit(stretch, linear, _tanh_starts(fits, stretch.peak))
-            parameters, mapped = (2 if form["offset"] else 1), tanh_map(u, form["scale"], form["offset"], form["gain"])
+            # Later rounds start from the last: the core moved little.
+            starts = _tanh_starts(fits, stretch.peak) if theta is None else [theta]
+            form, gain, error, theta = _tanh_fit(stretch, linear, starts)
+            parameters = 2 if form["offset"] else 1
+
+        def mapped(x):
+            if form is not None:
+                return tanh_map(x, form["scale"], form["offset"], form["gain"])
+            return np.polynomial.polynomial.polyval(x, [0.0, *coefficients])
         A, B, C, D = core
         core = (A, B * gain, C, D * gain)
         # 2. The core with the map held: output error on the raw DFT of (f(u), y), the order kept.
-        data = block_data(Recording(mapped, y, noise.fs, noise.path), band, None)
+        data = block_data(Recording(mapped(core_u), core_y, noise.fs, noise.path), band, None)
         oe = refine_output_error(*core, data, delay=model.delay, feedthrough=bool(model.D[0, 0]), noise_tolerance=True)
         if np.max(np.abs(np.linalg.eigvals(oe.A))) < 1.0:
             core = (oe.A, oe.B, oe.C, oe.D)
-        error = float(np.mean((stretch.y - stretch.through(_linear(model, core), mapped)) ** 2))
+        error = float(np.mean((stretch.y - stretch.through(_linear(model, core), mapped(u))) ** 2))
         history.append(error)
         if len(history) > 1 and history[-2] - error < _GAIN * history[-2]:
             break

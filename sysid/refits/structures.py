@@ -48,8 +48,8 @@ from ..validation.compare import START_Q, compare, worst_bands
 from .machinery import (REFIT_OPTIONS, _core, _core_body, _disturbance, _output_error_data, _plain_input, _prepared,
                         _refit, _reidentify, _shift, _unmasked_delay, _warm, _with)
 
-# The noise recording's stretch (s) the Hammerstein refinement reads, and the orders above the model's a
-# core identified anew behind the input map may take.
+# The noise recording's stretch (s) the Hammerstein refinement fits the map on (the core: the refit's
+# refine_seconds), and the orders above the model's a core identified anew behind the input map may take.
 HAMMERSTEIN_SECONDS = 2.0
 MAX_ORDER_SEARCH = 20
 
@@ -90,11 +90,12 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     """
     body = _raw_body(model, noise, transient_s)
     shapes = ("polynomial", "tanh") if params.get("shape", "auto") == "auto" else (params["shape"],)
-    seconds = min((options or REFIT_OPTIONS).refine_seconds, HAMMERSTEIN_SECONDS)
+    core_seconds = (options or REFIT_OPTIONS).refine_seconds
 
     def joint(start, shape):
         try:
-            fit = fit_hammerstein(start, body, shape, seconds, max_degree=params["degree"])
+            fit = fit_hammerstein(start, body, shape, min(core_seconds, HAMMERSTEIN_SECONDS), core_seconds,
+                                  max_degree=params["degree"])
         except IdentificationError:
             return None
         return _with(start, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
