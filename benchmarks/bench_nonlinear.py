@@ -69,6 +69,7 @@ def run(seed: int, path: str, shape: str, level: float) -> dict:
         "drive_limit": refined.identification.get("drive_limit_fs"),
         "noise_peak_db": 20 * np.log10(np.max(np.abs(body)) / sweep_amplitude),
         "noise_above": float(np.mean(np.abs(body) > sweep_amplitude)),
+        "noise_above_half": float(np.mean(np.abs(body) > 0.5 * sweep_amplitude)),
         "steps": sum(1 for s in auto.steps if s.accepted), "seconds": seconds,
     }
 
@@ -81,8 +82,8 @@ def main(argv=None) -> None:
     parser.add_argument("--shapes", default="tanh,poly")
     args = parser.parse_args(argv)
     print("| shape | H dB | helmet | named | rms/floor identified -> refined | H true / sweeps / model (dB) "
-          "| order (identified -> refined / true) | refined map | drive limit FS | noise peak re sweep (dB), share above "
-          "| steps | time (s) |")
+          "| order (identified -> refined / true) | refined map | drive limit FS | noise input: peak re sweep (dB), share "
+          "above the sweep's amplitude, above half | steps | time (s) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for shape in args.shapes.split(","):
@@ -95,7 +96,8 @@ def main(argv=None) -> None:
                     print(f"| {shape} | {level:g} | {seed} {path} | {'yes' if r['named'] else 'no'} | "
                           f"{r['identified']:.1f} -> {r['refined']:.2f} | {r['true_h']:.1f} / {r['measured_h']:.1f} / "
                           f"{r['model_h']:.1f} | {r['identified_order']} -> {r['order']} / {r['true_order']} | "
-                          f"{r['form']} | {limit} | {r['noise_peak_db']:.1f}, {100 * r['noise_above']:.1f} % | "
+                          f"{r['form']} | {limit} | {r['noise_peak_db']:.1f}, {100 * r['noise_above']:.2f} %, "
+                          f"{100 * r['noise_above_half']:.1f} % | "
                           f"{r['steps']} | {r['seconds']:.0f} |", flush=True)
     refined = np.array([r["refined"] for r in rows])
     print(f"\n{len(rows)} sessions: median refined rms/floor {np.median(refined):.2f}, worst {np.max(refined):.2f}, "

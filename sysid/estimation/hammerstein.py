@@ -71,12 +71,15 @@ class HammersteinFit:
 
 
 class _Stretch:
-    """The noise recording's stretch the time-domain steps read: input, band-passed ear signal, the band filter."""
+    """The noise recording's stretch the time-domain steps read: its input from the recording's start (the
+    simulation starts from rest where the recording does, so the plant's state at the stretch is the
+    recorded one: a slow mode started from rest at the stretch would misfit for its whole decay), the
+    band-passed ear signal over the stretch, the band filter."""
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, fs: float, band):
+    def __init__(self, u: np.ndarray, y: np.ndarray, fs: float, band, start: int):
         self.u, self.fs = u, fs
         self.band = scipy.signal.butter(4, band, "bandpass", fs=fs, output="sos")
-        self.first = int(round(_SETTLE_S * fs))
+        self.first = max(start, int(round(_SETTLE_S * fs)))
         self.y = self.filtered(y)
         self.peak = float(np.max(np.abs(u))) or 1.0
         # Samples of a band-limited signal carry 2 B / fs independent values each (Nyquist).
@@ -151,25 +154,27 @@ def _tanh_starts(fits, peak: float):
 
 
 def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
-                    core_seconds: float | None = None, band=IDENTIFICATION_BAND, max_degree: int = MAX_DEGREE,
-                    rounds: int = _ROUNDS) -> HammersteinFit:
+                    core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
+                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS) -> HammersteinFit:
     """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on
-    ``noise`` (the recording as the core sees it after its transient: the ear signal without disturbance or
-    offset, the input raw); see the module docstring. The map is fitted on the first ``seconds``, the core
-    on the first ``core_seconds`` (default: ``seconds``; the frequency-domain step is cheap, and a core of
-    lightly damped modes needs the longer record). ``model``'s own input map is replaced; its delay is
-    kept, and its core is the start.
+    ``noise`` (the recording as the core sees it: the ear signal without disturbance or offset, the input
+    raw) after its first ``transient_s``; see the module docstring. The map is fitted on the first
+    ``seconds`` after the transient (simulated from the recording's start), the core on the first
+    ``core_seconds`` (default: ``seconds``; the frequency-domain step is cheap, and a core of lightly damped
+    modes needs the longer record). ``model``'s own input map is replaced; its delay is kept, and its core
+    is the start.
     """
     if kind not in ("polynomial", "tanh"):
         raise ValueError(f"kind must be polynomial or tanh; found {kind!r}")
     if model.order == 0:
         raise IdentificationError("a Hammerstein refinement needs a core of order at least 1")
-    n = min(noise.u.size, int(round(seconds * noise.fs)))
+    start = min(int(round(transient_s * noise.fs)), noise.u.size - 1)
+    n = min(noise.u.size, start + int(round(seconds * noise.fs)))
     # The input as recorded (the map acts on it so); the band-pass takes the ear signal's mean out.
     u, y = noise.u[:n], noise.y[:n]
-    stretch = _Stretch(u, y, noise.fs, band)
-    m = min(noise.u.size, int(round((core_seconds or seconds) * noise.fs)))
-    core_u, core_y = noise.u[:m], noise.y[:m]
+    stretch = _Stretch(u, y, noise.fs, band, start)
+    m = min(noise.u.size, start + int(round((core_seconds or seconds) * noise.fs)))
+    core_u, core_y = noise.u[start:m], noise.y[start:m]
     core = (model.A, model.B, model.C, model.D)
     cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(u))) ** 2))
     history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None

@@ -88,14 +88,14 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     best map (every order: the order chosen on the nonlinear data fitted harmonics or missed modes they hid)
     and refined with the map again. The shape of lowest validation rms is kept (``_refit``).
     """
-    body = _raw_body(model, noise, transient_s)
+    recording = _raw_recording(model, noise)
     shapes = ("polynomial", "tanh") if params.get("shape", "auto") == "auto" else (params["shape"],)
     core_seconds = (options or REFIT_OPTIONS).refine_seconds
 
     def joint(start, shape):
         try:
-            fit = fit_hammerstein(start, body, shape, min(core_seconds, HAMMERSTEIN_SECONDS), core_seconds,
-                                  max_degree=params["degree"])
+            fit = fit_hammerstein(start, recording, shape, min(core_seconds, HAMMERSTEIN_SECONDS), core_seconds,
+                                  transient_s, max_degree=params["degree"])
         except IdentificationError:
             return None
         return _with(start, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
@@ -126,12 +126,12 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
                   "drive_limit_fs": best.identification["drive_limit_fs"]}
 
 
-def _raw_body(model, noise, transient_s) -> Recording:
-    """The noise recording after its transient as the model's input map sees it: the raw input, the ear signal
-    without the model's disturbance and output offset (``sysid.refits.machinery._core_body`` before the map)."""
-    body = _prepared(model, noise).trimmed(transient_s)
-    y = body.y - model.output_offset - _disturbance(model, body, model.disturbance_frequencies)
-    return Recording(body.u, y, body.fs, body.path)
+def _raw_recording(model, noise) -> Recording:
+    """The noise recording as the model's input map sees it: the raw input, the ear signal without the model's
+    disturbance and output offset (``sysid.refits.machinery._core_body`` before the map, the transient kept)."""
+    prepared = _prepared(model, noise)
+    y = prepared.y - model.output_offset - _disturbance(model, prepared, model.disturbance_frequencies)
+    return Recording(prepared.u, y, prepared.fs, prepared.path)
 
 
 def add_periodic_disturbance(model, noise, sweeps, params, options, transient_s):

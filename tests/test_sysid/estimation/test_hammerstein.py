@@ -24,7 +24,8 @@ def _session(effect):
 def test_a_saturation_is_recovered_with_the_true_core():
     session, base = _session("input-nonlinearity:h3_db=-20,h2_db=-120,tanh=1")
     truth = session.truth["effects"][0]["form"]
-    fit = fit_hammerstein(base, session.noise.trimmed(session.spec.transient_s), "tanh", seconds=2.0, core_seconds=5.0)
+    fit = fit_hammerstein(base, session.noise, "tanh", seconds=2.0, core_seconds=5.0,
+                          transient_s=session.spec.transient_s)
     model = fit.model(base)
     assert model.order == base.order
     assert fit.form["scale"] == pytest.approx(truth["scale"], rel=0.02)
@@ -36,7 +37,8 @@ def test_a_saturation_is_recovered_with_the_true_core():
 def test_an_asymmetric_polynomial_is_recovered_at_its_degree():
     session, base = _session("input-nonlinearity:h2_db=-22,h3_db=-120")
     a2 = session.truth["effects"][0]["coefficients"][1]
-    fit = fit_hammerstein(base, session.noise.trimmed(session.spec.transient_s), "polynomial", seconds=2.0, core_seconds=5.0)
+    fit = fit_hammerstein(base, session.noise, "polynomial", seconds=2.0, core_seconds=5.0,
+                          transient_s=session.spec.transient_s)
     assert fit.form is None and fit.coefficients[0] == 1.0
     assert len(fit.coefficients) == 2  # the description length stops at u^2
     assert fit.coefficients[1] == pytest.approx(a2, rel=0.02)
