@@ -57,10 +57,10 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     measured = sweep_harmonics(ctx.sweeps)
     if measured is not None:
         model = harmonic_levels(ctx.model.apply_input_nonlinearity, measured.amplitude)
-        params.update(sweep_amplitude_fs=measured.amplitude, measured_h2_db=measured.levels_db[2],
-                      measured_h3_db=measured.levels_db[3], model_h2_db=model[2], model_h3_db=model[3])
-        evidence.update(harmonic_frequencies_hz=measured.frequencies_hz, measured_h2_curve_db=measured.curves_db[2],
-                        measured_h3_curve_db=measured.curves_db[3])
+        params.update(sweep_amplitude_fs=float(measured.amplitude), measured_h2_db=float(measured.levels_db[2]),
+                      measured_h3_db=float(measured.levels_db[3]), model_h2_db=float(model[2]), model_h3_db=float(model[3]))
+        evidence.update(harmonic_frequencies_hz=measured.frequencies_hz.tolist(),
+                        measured_h2_curve_db=measured.curves_db[2].tolist(), measured_h3_curve_db=measured.curves_db[3].tolist())
         explanation += (f"; on the sweeps (amplitude {measured.amplitude:.3g} FS) H2 {measured.levels_db[2]:.1f} dB and "
                         f"H3 {measured.levels_db[3]:.1f} dB measured, the model's {model[2]:.1f} and {model[3]:.1f} dB")
     return finding("input-nonlinearity", significant, score, params, explanation,

@@ -1,5 +1,7 @@
 """The input-nonlinearity finding measures the harmonics on the sweeps (Farina) and sets the model's beside them."""
 
+import json
+
 import pytest
 from effect_units import true_context
 
@@ -17,6 +19,7 @@ def test_a_saturation_is_named_with_its_measured_third_harmonic():
     assert params["model_h3_db"] < -100.0  # the linear model has none
     assert len(found["evidence"]["measured_h3_curve_db"]) == len(found["evidence"]["harmonic_frequencies_hz"])
     assert "measured" in found["explanation"]
+    json.dumps(found.to_dict())  # the diagnosis JSON holds it
 
 
 def test_a_linear_path_measures_no_harmonics():
