@@ -6,8 +6,10 @@ harmonic levels (dB re the fundamental) of a sine at the session's largest input
 its offset o) whose levels hold at the sweeps' amplitude (``saturation``);
 detected by regressing the sweep residual on u^2, u^3 through the model's linear part
 (``sysid.findings.nonlinearity``, after the series factors and the delay, whose
-misfit it must not mistake for harmonics); refined by a Hammerstein input polynomial
-(``sysid.refits.add_input_nonlinearity``).
+misfit it must not mistake for harmonics), the harmonics also measured on exponential
+sweeps (Farina); refined by a Hammerstein input map fitted together with the core
+(``sysid.refits.add_input_nonlinearity``: a polynomial of degree up to ``degree`` chosen by
+description length, or a tanh saturation, whichever validates better).
 """
 
 from __future__ import annotations
