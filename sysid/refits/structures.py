@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ..core.errors import IdentificationError
+from ..core.errors import IdentificationError, ModelError
 from ..core.model import Model
 from ..core.structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
 from ..core.thresholds import AT_FLOOR, EIV_MIN_ATTENUATION
@@ -93,13 +93,15 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     core_seconds = (options or REFIT_OPTIONS).refine_seconds
 
     def joint(start, shape):
+        # A shape that fails (no stable core; a polynomial whose coefficients in FS units pass the model's
+        # limits: degree 7 on a drive of 0.07 FS peak, the seed's FB path) leaves the others.
         try:
             fit = fit_hammerstein(start, recording, shape, min(core_seconds, HAMMERSTEIN_SECONDS), core_seconds,
                                   transient_s, max_degree=params["degree"])
-        except IdentificationError:
+            return _with(start, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
+                         input_nonlinearity_form=fit.form)
+        except (IdentificationError, ModelError):
             return None
-        return _with(start, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
-                     input_nonlinearity_form=fit.form)
 
     trials = [t for t in (joint(model, shape) for shape in shapes) if t is not None and t.stable]
     if not trials:
