@@ -114,13 +114,16 @@ def drive_limit(model: Model, level_db: float = DRIVE_LIMIT_DB, largest: float =
 class SweepHarmonics:
     """Harmonic levels measured on exponential sweeps: ``levels_db`` {k: dB re the fundamental over the band},
     ``frequencies_hz`` (the sweep's frequency f) and ``curves_db`` {k: level at f, third-octave smoothed},
-    the sweep's input ``amplitude`` (FS) and its rate constant ``rate_s`` L (s)."""
+    the sweep's input ``amplitude`` (FS) and its rate constant ``rate_s`` L (s); ``snr`` {k: the k-th
+    response's power over the output noise's in the same window and band} (the noise read on the two
+    sweeps' difference; None from one sweep)."""
 
     levels_db: dict
     frequencies_hz: np.ndarray
     curves_db: dict
     amplitude: float
     rate_s: float
+    snr: dict | None = None
 
 
 # Below this R^2 of ln f(t) against t the sweep is not exponential (Farina's separation needs one).
@@ -167,25 +170,37 @@ def sweep_harmonics(sweeps: list[Recording], orders=(2, 3), points: int = 24) ->
     edges = [scipy.signal.butter(4, f0, "highpass", fs=fs, output="sos"), scipy.signal.butter(4, f1, fs=fs, output="sos")]
     band_filter = np.prod([scipy.signal.sosfreqz(sos, worN=frequencies, fs=fs)[1] for sos in edges], axis=0)
     powers: dict[int, np.ndarray] = {k: 0.0 for k in (1, *orders)}
-    for sweep in sweeps:
-        U, Y = np.fft.rfft(sweep.u - sweep.u.mean(), n), np.fft.rfft(sweep.y - sweep.y.mean(), n)
+    windows = {}
+    for k in (1, *orders):
+        onset = -L * math.log(k)
+        length = min(L * math.log(k / (k - 1)) if k > 1 else L * math.log(2), _LONGEST_S)
+        start = int(round((onset - _PRE_S) * fs))
+        windows[k] = np.arange(start, start + int(round(length * fs)))
+
+    def responses(u, y):
+        U, Y = np.fft.rfft(u - u.mean(), n), np.fft.rfft(y - y.mean(), n)
         power = np.abs(U) ** 2
-        H = band_filter * Y * np.conj(U) / (power + 1e-8 * np.max(power))
-        h = np.fft.irfft(H, n)
-        for k in (1, *orders):
-            onset = -L * math.log(k)
-            length = min(L * math.log(k / (k - 1)) if k > 1 else L * math.log(2), _LONGEST_S)
-            start = int(round((onset - _PRE_S) * fs))
-            window = np.take(h, np.arange(start, start + int(round(length * fs))), mode="wrap")
-            powers[k] = powers[k] + np.abs(np.fft.rfft(window, n)) ** 2
+        h = np.fft.irfft(band_filter * Y * np.conj(U) / (power + 1e-8 * np.max(power)), n)
+        return {k: np.abs(np.fft.rfft(np.take(h, window, mode="wrap"), n)) ** 2 for k, window in windows.items()}
+
+    for sweep in sweeps:
+        for k, p in responses(sweep.u, sweep.y).items():
+            powers[k] = powers[k] + p
+    # The output noise in each window: the sweeps repeat one excitation, so their difference is noise
+    # alone (of twice one sweep's variance, each sweep adding one variance to the sum above).
+    noise = None
+    if len(sweeps) >= 2 and sweeps[0].y.size == sweeps[1].y.size:
+        noise = {k: p * len(sweeps) / 2 for k, p in responses(sweeps[0].u, sweeps[0].y - sweeps[1].y).items()}
     centres = np.geomspace(f0 * 1.26, f1 / max(orders) / 1.26, points)
-    levels, curves = {}, {}
+    levels, curves, snr = {}, {}, {}
     for k in orders:
         band = inside & (frequencies >= k * f0 * 1.26) & (frequencies <= f1 / 1.26)
         levels[k] = float(10 * np.log10(max(np.sum(powers[k][band]), 1e-300) / max(np.sum(powers[1][band]), 1e-300)))
+        if noise is not None:
+            snr[k] = float(np.sum(powers[k][band]) / max(np.sum(noise[k][band]), 1e-300))
         curve = []
         for f in centres:
             near = (frequencies >= k * f * 2 ** (-1 / 6)) & (frequencies <= k * f * 2 ** (1 / 6))
             curve.append(10 * np.log10(max(np.sum(powers[k][near]), 1e-300) / max(np.sum(powers[1][near]), 1e-300)))
         curves[k] = np.array(curve)
-    return SweepHarmonics(levels, centres, curves, amplitude, L)
+    return SweepHarmonics(levels, centres, curves, amplitude, L, snr if noise is not None else None)

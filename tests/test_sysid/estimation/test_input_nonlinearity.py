@@ -49,12 +49,12 @@ def test_drive_limit_is_where_the_distortion_reaches_the_level():
     assert drive_limit(replace(appendix_a_model("fb"), input_nonlinearity=[1.0, 0.0, -1e-6])) is None  # beyond 16 FS
 
 
-def _hammerstein_sweeps(static_map, method="logarithmic"):
+def _hammerstein_sweeps(static_map, method="logarithmic", repeats=1):
     spec = SessionSpec(fs=44100.0, sweep_duration=2.0, sweep_silence=0.2, sweep_method=method)
     u = 0.5 * sweep_signal(spec)
-    plant = appendix_a_model("ff")
-    y = plant.simulate(static_map(u)) + 1e-5 * np.random.default_rng(0).standard_normal(u.size)
-    return [Recording(u, y, spec.fs, "sweep.wav")]
+    y = appendix_a_model("ff").simulate(static_map(u))
+    rng = np.random.default_rng(0)
+    return [Recording(u, y + 1e-4 * rng.standard_normal(u.size), spec.fs, f"sweep{k}.wav") for k in range(repeats)]
 
 
 def test_sweep_harmonics_read_the_maps_levels_on_an_exponential_sweep():
@@ -71,3 +71,13 @@ def test_a_linear_path_shows_no_harmonics_and_a_linear_sweep_none():
     measured = sweep_harmonics(_hammerstein_sweeps(lambda u: u))
     assert max(measured.levels_db.values()) < -50
     assert sweep_harmonics(_hammerstein_sweeps(lambda u: u, method="linear")) is None
+
+
+def test_the_harmonics_are_judged_against_the_output_noise_of_the_repeated_sweeps():
+    # Two sweeps of one excitation: their difference is noise alone, read in each harmonic's window.
+    clean = sweep_harmonics(_hammerstein_sweeps(lambda u: u, repeats=2))
+    assert all(0.5 < v < 2.0 for v in clean.snr.values())  # noise reads as noise: a ratio near 1
+    form = saturation_form(-30.0, -120.0, 0.5)
+    saturated = sweep_harmonics(_hammerstein_sweeps(lambda u: tanh_map(u, form["scale"]), repeats=2))
+    assert saturated.snr[3] > 100.0
+    assert sweep_harmonics(_hammerstein_sweeps(lambda u: u)).snr is None  # one sweep: no noise reference
