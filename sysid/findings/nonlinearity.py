@@ -11,7 +11,10 @@ amplitude (noise recording and sweeps), as ``simulate --effect input-nonlinearit
 On exponential sweeps the harmonics are also measured directly (Farina's separation,
 ``sysid.estimation.input_nonlinearity.sweep_harmonics``) and set beside the model's own at the sweeps'
 amplitude: ``measured_h2_db``/``measured_h3_db`` and ``model_h2_db``/``model_h3_db`` in the params, the
-levels against the sweep's frequency in the evidence (the diagnosis figure draws them).
+levels against the sweep's frequency in the evidence (the diagnosis figure draws them). A harmonic
+the model lacks that stands well above the output noise in its window (``FARINA_SNR``) makes the
+finding significant by itself: a linear part far from the truth (a strong saturation hides modes from
+the identification) leaves the regression too little to explain, the separated harmonic stays.
 """
 
 from __future__ import annotations
