@@ -96,7 +96,11 @@ class Plan:
             "target": self.target,
             "model": {**self.provenance, "fs": self.model.fs, "delay": self.model.delay,
                       "stable": self.model.stable, "spectral_radius": self.model.spectral_radius,
-                      "input_nonlinearity": self.model.input_nonlinearity},
+                      "input_nonlinearity": self.model.input_nonlinearity,
+                      # A saturation form is not generated: the drive passes it before the filter's input.
+                      **({"input_nonlinearity_form": {**self.model.input_nonlinearity_form,
+                                                      "generated": "no: outside the generated linear filter"}}
+                         if self.model.input_nonlinearity_form else {})},
             "board": {"fs": realisation.fs, "delay": realisation.delay, "delay_error_s": realisation.delay_error_s,
                       "resampled_from": realisation.resampled_from,
                       "delay_approximation": ("delay rounded to the nearest board sample" if realisation.resampled_from

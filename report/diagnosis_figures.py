@@ -93,13 +93,17 @@ def _delay(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
 
 
 def _nonlinearity(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: float):
-    """Spectrogram of the first sweep's error with the sweep's 1st, 2nd and 3rd harmonic traced."""
+    """Spectrogram of the first sweep's error with the sweep's 1st, 2nd and 3rd harmonic traced; below it, on
+    exponential sweeps, the harmonic levels measured by Farina's separation against the model's (the finding's)."""
     record = ctx.comparison.per_sweep[0]
     fs = float(record["fs"])
     residual = np.asarray(record["residual"], dtype=float)
     nperseg = 2048
     f, t, power = scipy.signal.spectrogram(residual, fs, nperseg=nperseg, noverlap=nperseg * 3 // 4)
-    figure, (ax,) = new_figure(1, 1, height=3.6, dpi=dpi)
+    evidence, params = finding.get("evidence", {}), finding["params"]
+    measured = "harmonic_frequencies_hz" in evidence
+    figure, axes = new_figure(2 if measured else 1, 1, height=3.6 if not measured else 3.0, dpi=dpi)
+    ax = axes[0]
     keep = f <= 3 * 4000.0
     levels = 10 * np.log10(power[keep] + 1e-30)
     top = float(np.max(levels))
@@ -114,6 +118,18 @@ def _nonlinearity(ctx: DiagnosisContext, spectra: Spectra, finding: dict, dpi: f
     ax.set_ylabel("frequency (Hz)")
     ax.legend(fontsize=7, loc="lower right")
     _title(ax, finding)
+    if measured:
+        ax = axes[1]
+        frequencies = np.asarray(evidence["harmonic_frequencies_hz"], dtype=float)
+        for k, color in ((2, COLORS["measured"]), (3, COLORS["model"])):
+            ax.semilogx(frequencies, evidence[f"measured_h{k}_curve_db"], color=color, lw=1.2,
+                        label=f"H{k} measured (sweep, Farina): {params[f'measured_h{k}_db']:.1f} dB")
+            ax.axhline(params[f"model_h{k}_db"], color=color, ls="--", lw=0.9,
+                       label=f"H{k} of the model: {params[f'model_h{k}_db']:.1f} dB")
+        ax.set_xlabel("sweep frequency (Hz)")
+        ax.set_ylabel(f"dB re fundamental at {params['sweep_amplitude_fs']:.3g} FS")
+        ax.set_ylim(-90, 0)
+        ax.legend(fontsize=7, loc="lower left")
     return figure
 
 

@@ -146,7 +146,15 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | FirPlant | 
     ear_peak = max(noise_gain * np.max(np.abs(linear.simulate(noise_in))), sweep_gain * np.max(np.abs(linear.simulate(sweep_in))))
     records = _effect_records(hidden, spec, noise_gain, max(sweep_gain, noise_gain * float(np.max(np.abs(noise_in)))),
                               float(ear_peak))
-    if "input-nonlinearity" in hidden:
+    if hidden.get("input-nonlinearity", {}).get("tanh"):
+        # A saturating driver (sysid.effects.input_nonlinearity.saturation): levels at the sweeps' amplitude.
+        from .effects.input_nonlinearity import saturation
+
+        records["input-nonlinearity"] = saturation(hidden["input-nonlinearity"], sweep_gain)
+        if isinstance(plant, FirPlant):
+            raise HelmetAncError("--effect input-nonlinearity with tanh=1 needs a state-space plant")
+        plant.input_nonlinearity_form = records["input-nonlinearity"]["form"]
+    elif "input-nonlinearity" in hidden:
         if isinstance(plant, FirPlant):
             plant = replace(plant, input_nonlinearity=records["input-nonlinearity"]["coefficients"])
         else:
@@ -241,7 +249,8 @@ def _effective_plant(base: Model | FirPlant, hidden: dict[str, dict]) -> Model |
     delay = base.delay + (hidden["delay"]["samples"] if "delay" in hidden else 0)
     A, B, C, D = system
     return Model(path=base.path, fs=base.fs, A=A, B=B, C=C, D=D, delay=delay,
-                 input_nonlinearity=base.input_nonlinearity, identification={"source": "simulated plant with hidden effects"})
+                 input_nonlinearity=base.input_nonlinearity, input_nonlinearity_form=base.input_nonlinearity_form,
+                 identification={"source": "simulated plant with hidden effects"})
 
 
 def _effect_records(hidden: dict[str, dict], spec: SessionSpec, noise_gain: float, peak_input: float,

@@ -1,6 +1,6 @@
 """The helmet-anc model of one sound path and its JSON file (format helmet-anc/model@1).
 
-A model is the chain  u -> [static input polynomial] -> [z^-delay] -> (A, B, C, D) -> y
+A model is the chain  u -> [static input nonlinearity] -> [z^-delay] -> (A, B, C, D) -> y
 at one sample rate, optionally with a disturbance model (sinusoids at given
 frequencies) that explains part of a measured ear signal but is not part of the
 plant. ``history`` records every refinement; ``identification`` how the model was
@@ -22,6 +22,18 @@ cost of each order (``sections``, emulated Cortex-M4 instructions per sample ``q
 and ``refined_ratio``, the ``chosen`` order and the curve's ``source``; ``capped`` (only when
 the cap stopped the model above the floor) its ``max_order``, the model's ``ratio``, the
 ``floor_order`` the data ask for, its ``floor_ratio`` and ``floor_instructions`` per sample.
+
+The static input nonlinearity (a Hammerstein model's) is a parametric form, then a polynomial,
+both optional: v = sum_k a_k w^k with w = form(u). JSON ``"input_nonlinearity": null |
+{"coefficients": [a1, a2, ...]}`` holds the polynomial; the optional field
+``"input_nonlinearity_form": null | {"kind": "tanh", "scale": s, "gain": g, "offset": o}`` (FS
+units; absent = none; ``offset`` defaults to 0, ``gain`` to 1) the saturation
+
+    w = g (s tanh((u + o) / s) - s tanh(o / s)),
+
+a soft clipper that saturates at g s (1 -+ tanh(o / s)) and whose offset o makes it asymmetric
+(an even part: a second harmonic); w(0) = 0 and its small-signal gain is g / cosh^2(o / s). A
+model without the field is simulated, saved and compared exactly as before it existed.
 """
 
 from __future__ import annotations
@@ -83,6 +95,28 @@ def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     return array
 
 
+FORM_KINDS = ("tanh",)
+
+
+def _nonlinearity_form(value) -> dict | None:
+    """The ``input_nonlinearity_form`` field checked: null or {"kind": "tanh", "scale": s > 0, "gain", "offset"}."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or value.get("kind") not in FORM_KINDS:
+        raise ModelError(f'input_nonlinearity_form must be null or an object {{"kind": one of {", ".join(FORM_KINDS)}, '
+                         '"scale": s, "gain": g, "offset": o}')
+    try:
+        scale, gain, offset = (float(value.get(key, default)) for key, default in
+                               (("scale", math.nan), ("gain", 1.0), ("offset", 0.0)))
+    except (TypeError, ValueError):
+        raise ModelError("input_nonlinearity_form scale, gain and offset must be numbers") from None
+    if not (math.isfinite(scale) and 0 < scale <= MAX_COEFFICIENT):
+        raise ModelError(f"input_nonlinearity_form scale must be a positive amplitude (FS); found {value.get('scale')!r}")
+    if not (math.isfinite(gain) and abs(gain) <= MAX_COEFFICIENT and math.isfinite(offset) and abs(offset) <= 10 * scale):
+        raise ModelError("input_nonlinearity_form gain must be finite and offset within ten times the scale")
+    return {**value, "kind": value["kind"], "scale": scale, "gain": gain, "offset": offset}
+
+
 def _uncertainty_band(value) -> dict | None:
     """The ``uncertainty`` field checked: null or {"frequencies_hz", "relative_95", ...} (sysid.estimation.uncertainty)."""
     if value is None:
@@ -115,7 +149,8 @@ class Model:
 
     A, B, C, D are real arrays of shapes (n, n), (n, 1), (1, n), (1, 1) for
     x(t+1) = A x(t) + B v(t - delay), y(t) = C x(t) + D v(t - delay), where
-    v = sum_k a_k u^k is the input polynomial (v = u when there is none). Units:
+    v = sum_k a_k w^k is the input polynomial (v = w when there is none) of w = form(u), the
+    parametric input nonlinearity ``input_nonlinearity_form`` (w = u when there is none). Units:
     full-scale signal units in and out, ``fs`` in Hz, ``delay`` in samples.
     """
 
@@ -139,6 +174,8 @@ class Model:
     excluded: dict[str, list[list[float]]] = field(default_factory=dict)
     # 95 % bound on |H_model - H_true| / |H_model| per frequency (sysid.estimation.uncertainty); None when unknown.
     uncertainty: dict | None = None
+    # The parametric input nonlinearity in front of the polynomial (module docstring); None when absent.
+    input_nonlinearity_form: dict | None = None
 
     def __post_init__(self):
         if self.path not in PATHS:
@@ -199,6 +236,7 @@ class Model:
         except (TypeError, ValueError):
             raise ModelError("excluded must map each recording to [[start_s, stop_s], ...]") from None
         self.uncertainty = _uncertainty_band(self.uncertainty)
+        self.input_nonlinearity_form = _nonlinearity_form(self.input_nonlinearity_form)
 
     # -- properties -------------------------------------------------------------
     @property
@@ -232,18 +270,25 @@ class Model:
     def frequency_response(self, frequencies_hz) -> np.ndarray:
         """Complex response of the linear part (delay included) at frequencies in Hz.
 
-        The input polynomial contributes its linear coefficient a1 (the small-signal gain).
+        The input nonlinearity contributes its small-signal gain (a1, times g / cosh^2(o / s) of a form).
         """
         f = np.asarray(frequencies_hz, dtype=float)
         z = np.exp(2j * np.pi * f / self.fs)
         response = lti.frequency_response(self.A, self.B, self.C, self.D, z) * z ** (-self.delay)
         if self.input_nonlinearity is not None:
             response = response * self.input_nonlinearity[0]
+        if self.input_nonlinearity_form is not None:
+            form = self.input_nonlinearity_form
+            response = response * form["gain"] / math.cosh(form["offset"] / form["scale"]) ** 2
         return response
 
     def apply_input_nonlinearity(self, u: np.ndarray) -> np.ndarray:
-        """v = a1 u + a2 u^2 + ... (identity when the model has no input polynomial)."""
+        """v = a1 w + a2 w^2 + ... of w = form(u) (the module docstring; identity when the model has neither)."""
         u = np.asarray(u, dtype=float)
+        if self.input_nonlinearity_form is not None:
+            form = self.input_nonlinearity_form
+            s, o = form["scale"], form["offset"]
+            u = form["gain"] * s * (np.tanh((u + o) / s) - math.tanh(o / s))
         if self.input_nonlinearity is None:
             return u
         v = np.zeros_like(u)
@@ -294,6 +339,8 @@ class Model:
             **({"clock_ratio": self.clock_ratio} if self.clock_ratio != 1.0 else {}),
             **({"excluded": dict(self.excluded)} if self.excluded else {}),
             **({"uncertainty": dict(self.uncertainty)} if self.uncertainty is not None else {}),
+            **({"input_nonlinearity_form": dict(self.input_nonlinearity_form)}
+               if self.input_nonlinearity_form is not None else {}),
         }
 
     @classmethod
@@ -340,6 +387,7 @@ class Model:
             clock_ratio=data.get("clock_ratio", 1.0),
             excluded=data.get("excluded") or {},
             uncertainty=data.get("uncertainty"),
+            input_nonlinearity_form=data.get("input_nonlinearity_form"),
         )
 
     def to_json(self) -> str:

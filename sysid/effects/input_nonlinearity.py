@@ -1,11 +1,15 @@
 """input-nonlinearity: a loudspeaker's Bl(x), Kms(x) or an amplifier, H2/H3 at -45..-30 dB (effects.md).
 
 Simulated as a static polynomial u + a2 u^2 + a3 u^3 in front of the plant, given as
-harmonic levels (dB re the fundamental) of a sine at the session's largest input;
+harmonic levels (dB re the fundamental) of a sine at the session's largest input, or with
+``tanh=1`` as a saturating driver s tanh((u + o)/s) - s tanh(o/s) (a soft clipper, asymmetric by
+its offset o) whose levels hold at the sweeps' amplitude (``saturation``);
 detected by regressing the sweep residual on u^2, u^3 through the model's linear part
 (``sysid.findings.nonlinearity``, after the series factors and the delay, whose
-misfit it must not mistake for harmonics); refined by a Hammerstein input polynomial
-(``sysid.refits.add_input_nonlinearity``).
+misfit it must not mistake for harmonics), the harmonics also measured on exponential
+sweeps (Farina); refined by a Hammerstein input map fitted together with the core
+(``sysid.refits.add_input_nonlinearity``: a polynomial of degree up to ``degree`` chosen by
+description length, or a tanh saturation, whichever validates better).
 """
 
 from __future__ import annotations
@@ -13,7 +17,16 @@ from __future__ import annotations
 from ..core.effect_spec import ParameterSpec
 from .registry import Effect, register
 
-__all__ = ["INPUT_NONLINEARITY"]
+__all__ = ["INPUT_NONLINEARITY", "saturation"]
+
+
+def saturation(params: dict, sweep_amplitude: float) -> dict:
+    """The truth record of a saturating driver (``tanh=1``): its form (``sysid.core.model``) of harmonic levels
+    ``h2_db``, ``h3_db`` at the sweeps' input amplitude (FS), which ``reference_amplitude`` records."""
+    from ..estimation.input_nonlinearity import saturation_form
+
+    return {"coefficients": None, "form": saturation_form(params["h3_db"], params["h2_db"], sweep_amplitude),
+            "reference_amplitude": float(sweep_amplitude)}
 
 
 def _random(rng):
@@ -23,8 +36,9 @@ def _random(rng):
 
 INPUT_NONLINEARITY = register(Effect(
     name="input-nonlinearity", summary="static input polynomial (Hammerstein): harmonics at 2f, 3f",
-    simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0)),
-    refine_params=(ParameterSpec("degree", 3, 2, 3, "int"),),
-    detect="sysid.findings.nonlinearity:nonlinearity_finding", needs=("resonance", "highpass", "lowpass", "delay"),
+    simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0),
+                     ParameterSpec("tanh", 0, 0, 1, "int")),
+    refine_params=(ParameterSpec("degree", 7, 2, 7, "int"),),
+    detect="sysid.findings.nonlinearity:nonlinearity_finding", needs=("resonance", "highpass", "lowpass", "delay", "clipping"),
     build="sysid.refits:add_input_nonlinearity",
-    auto_params=lambda p: {"degree": 3}, figure="harmonics", random=_random))
+    auto_params=lambda p: {"degree": 7}, figure="harmonics", random=_random))

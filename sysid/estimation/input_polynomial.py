@@ -8,7 +8,9 @@ regression e = X a holds for the filtered signals). The u^2 and u^3 columns put 
 linear term the polynomial is u + (a2 / a1) u^2 + (a3 / a1) u^3.
 
 Used by the input-nonlinearity finding (``sysid.findings.nonlinearity``: how much the harmonic
-columns explain) and by its refit (``sysid.refits.add_input_nonlinearity``: the coefficients).
+columns explain). The refit fits the map with the core instead (``sysid.estimation.hammerstein``):
+with the core held, coefficients read through a linear part that has absorbed part of the
+nonlinearity stop short (a tanh on the seed's FB path: 27x the floor).
 """
 
 from __future__ import annotations

@@ -103,7 +103,8 @@ def _with(model: Model, core, **changes) -> Model:
     same_core = all(np.array_equal(a, b) for a, b in zip((A, B, C, D), (model.A, model.B, model.C, model.D)))
     fields = dict(path=model.path, fs=model.fs, A=A, B=B, C=C, D=D, delay=model.delay,
                   uncertainty=model.uncertainty if same_core else None,
-                  input_nonlinearity=model.input_nonlinearity, disturbance_frequencies=model.disturbance_frequencies,
+                  input_nonlinearity=model.input_nonlinearity, input_nonlinearity_form=model.input_nonlinearity_form,
+                  disturbance_frequencies=model.disturbance_frequencies,
                   history=list(model.history), identification=dict(model.identification),
                   output_offset=model.output_offset, clock_ratio=model.clock_ratio, excluded=dict(model.excluded))
     fields.update(changes)

@@ -1,0 +1,211 @@
+"""A Hammerstein model's static input nonlinearity and LTI core refined together by output error.
+
+The model is y = L(f(u)) + e with L the linear part (delay and core (A, B, C, D)) and f a static
+map: a polynomial sum_k c_k u^k of degree K (odd and even terms), or the saturation
+g (s tanh((u + o)/s) - s tanh(o/s)) (``sysid.core.model``). The criterion is the output error on
+the noise recording, V = sum_t (y_t - L(f(u))_t)^2 in the identification band, minimised over
+f and L together by alternating between the two blocks (Narendra & Gallman, "An iterative method
+for the identification of nonlinear systems using a Hammerstein model", IEEE Trans. Autom.
+Control 11(3), 1966; the relaxation of Bai, Automatica 34(3), 1998, sec. 3): with the core held,
+f by least squares in the time domain (linear in the c_k through the columns L(u^k); the
+saturation's s and o by Gauss-Newton, its gain by the same least squares); with f held, the
+core by the output-error refinement on the raw DFT of (f(u), y)
+(``sysid.estimation.output_error.refine_output_error``), which keeps its order. Each block
+lowers V, so the alternation descends; it stops when a round gains less than 0.1 %.
+
+The polynomial's degree is chosen by Rissanen's minimum description length on the output
+error, N ln V_K + K ln N, with N the band's effective number of independent samples (the
+band-passed stretch's samples times twice its bandwidth over fs). The gain between f and L is
+not identifiable: f is normalised to unit small-signal slope (c_1 = 1; g = cosh^2(o/s)) and the
+core carries the gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+import scipy.signal
+
+from ..core.errors import IdentificationError
+from ..core.model import Model
+from ..core.thresholds import IDENTIFICATION_BAND
+from ..io.recordings import Recording
+from .input_nonlinearity import tanh_map
+from .output_error import block_data, refine_output_error
+
+__all__ = ["HammersteinFit", "fit_hammerstein", "polynomial_degree", "MAX_DEGREE"]
+
+MAX_DEGREE = 7
+# Start of the time-domain stretch (s) left out of the criterion: the simulation from rest settles.
+_SETTLE_S = 0.05
+_ROUNDS = 4
+_GAIN = 1e-3
+
+
+@dataclass(frozen=True)
+class HammersteinFit:
+    """The refined core (A, B, C, D), the input map (``coefficients`` of the polynomial in u, a1 = 1, or
+    ``form`` the saturation; the other None), the in-band output error before and after (mean square,
+    FS^2), the map's free parameters and the rounds of the alternation."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    coefficients: list[float] | None
+    form: dict | None
+    cost_before: float
+    cost_after: float
+    parameters: int
+    rounds: int
+
+    def model(self, like: Model) -> Model:
+        """``like`` with this core and input map (its delay and everything else kept)."""
+        fields = {**like.__dict__, "A": self.A, "B": self.B, "C": self.C, "D": self.D,
+                  "input_nonlinearity": self.coefficients, "input_nonlinearity_form": self.form,
+                  "history": list(like.history), "identification": dict(like.identification), "uncertainty": None}
+        return Model(**fields)
+
+
+class _Stretch:
+    """The noise recording's stretch the time-domain steps read: its input from the recording's start (the
+    simulation starts from rest where the recording does, so the plant's state at the stretch is the
+    recorded one: a slow mode started from rest at the stretch would misfit for its whole decay), the
+    band-passed ear signal over the stretch, the band filter."""
+
+    def __init__(self, u: np.ndarray, y: np.ndarray, fs: float, band, start: int):
+        self.u, self.fs = u, fs
+        self.band = scipy.signal.butter(4, band, "bandpass", fs=fs, output="sos")
+        self.first = max(start, int(round(_SETTLE_S * fs)))
+        self.y = self.filtered(y)
+        self.peak = float(np.max(np.abs(u))) or 1.0
+        # Samples of a band-limited signal carry 2 B / fs independent values each (Nyquist).
+        self.effective = max(self.y.size * 2.0 * (band[1] - band[0]) / fs, 1.0)
+
+    def filtered(self, x: np.ndarray) -> np.ndarray:
+        return scipy.signal.sosfilt(self.band, x)[self.first:]
+
+    def through(self, linear: Model, v: np.ndarray) -> np.ndarray:
+        return self.filtered(linear.simulate(v))
+
+
+def _linear(model: Model, core=None) -> Model:
+    A, B, C, D = core if core is not None else (model.A, model.B, model.C, model.D)
+    return Model(path=model.path, fs=model.fs, A=A, B=B, C=C, D=D, delay=model.delay)
+
+
+def _polynomial_fits(stretch: _Stretch, linear: Model, max_degree: int):
+    """[(degree, relative coefficients c_k / c_1 on u / peak, c_1, mean-square error)] for degrees 1..max_degree."""
+    x = stretch.u / stretch.peak
+    columns = np.stack([stretch.through(linear, x**k) for k in range(1, max_degree + 1)], axis=1)
+    fits = []
+    for degree in range(1, max_degree + 1):
+        c, *_ = np.linalg.lstsq(columns[:, :degree], stretch.y, rcond=None)
+        error = float(np.mean((stretch.y - columns[:, :degree] @ c) ** 2))
+        fits.append((degree, c / c[0], float(c[0]), error))
+    return fits
+
+
+def polynomial_degree(fits, effective: float) -> int:
+    """The degree of least description length N ln V_K + K ln N among ``fits`` ((degree, _, _, V_K), ...)."""
+    return min(fits, key=lambda f: effective * math.log(max(f[3], 1e-300)) + f[0] * math.log(effective))[0]
+
+
+def _tanh_columns(stretch: _Stretch, linear: Model, theta):
+    """The unit-slope saturation of parameters (ln(s / peak), o / s) through the linear part, and its form."""
+    scale = stretch.peak * math.exp(float(np.clip(theta[0], -8.0, 8.0)))
+    offset = scale * float(np.clip(theta[1], -3.0, 3.0))
+    gain = math.cosh(offset / scale) ** 2
+    return stretch.through(linear, tanh_map(stretch.u, scale, offset, gain)), {"kind": "tanh", "scale": scale,
+                                                                               "gain": gain, "offset": offset}
+
+
+def _tanh_fit(stretch: _Stretch, linear: Model, starts):
+    """(form, gain of the linear part, mean-square error, parameters) of the saturation by Gauss-Newton over
+    (s, o), the gain by least squares at every step (variable projection); the best of ``starts``."""
+    def residual(theta):
+        column, _ = _tanh_columns(stretch, linear, theta)
+        g = float(column @ stretch.y) / max(float(column @ column), 1e-300)
+        return stretch.y - g * column
+
+    best = None
+    for theta0 in starts:
+        solution = scipy.optimize.least_squares(residual, theta0, method="trf", x_scale=1.0, max_nfev=40,
+                                                diff_step=1e-4, xtol=1e-6, ftol=1e-7)
+        error = float(np.mean(solution.fun**2))
+        if best is None or error < best[2]:
+            column, form = _tanh_columns(stretch, linear, solution.x)
+            best = (form, float(column @ stretch.y) / max(float(column @ column), 1e-300), error, solution.x)
+    return best
+
+
+def _tanh_starts(fits, peak: float):
+    """Starts of (ln(s / peak), o / s): from the cubic fit's a3 = -1 / (3 s^2) and a2 = -tanh(o/s) / s (the
+    Taylor series of the unit-slope saturation), and a saturation at and beyond the stretch's peak."""
+    _, c, _, _ = fits[2]
+    starts = [np.array([0.0, 0.0]), np.array([math.log(2.0), 0.0])]
+    if c[2] < 0:
+        ratio = math.sqrt(-1.0 / (3.0 * c[2]))
+        starts.insert(0, np.array([math.log(ratio), float(np.arctanh(np.clip(-c[1] * ratio, -0.9, 0.9)))]))
+    return starts
+
+
+def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
+                    core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
+                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS) -> HammersteinFit:
+    """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on
+    ``noise`` (the recording as the core sees it: the ear signal without disturbance or offset, the input
+    raw) after its first ``transient_s``; see the module docstring. The map is fitted on the first
+    ``seconds`` after the transient (simulated from the recording's start), the core on the first
+    ``core_seconds`` (default: ``seconds``; the frequency-domain step is cheap, and a core of lightly damped
+    modes needs the longer record). ``model``'s own input map is replaced; its delay is kept, and its core
+    is the start.
+    """
+    if kind not in ("polynomial", "tanh"):
+        raise ValueError(f"kind must be polynomial or tanh; found {kind!r}")
+    if model.order == 0:
+        raise IdentificationError("a Hammerstein refinement needs a core of order at least 1")
+    start = min(int(round(transient_s * noise.fs)), noise.u.size - 1)
+    n = min(noise.u.size, start + int(round(seconds * noise.fs)))
+    # The input as recorded (the map acts on it so); the band-pass takes the ear signal's mean out.
+    u, y = noise.u[:n], noise.y[:n]
+    stretch = _Stretch(u, y, noise.fs, band, start)
+    m = min(noise.u.size, start + int(round((core_seconds or seconds) * noise.fs)))
+    core_u, core_y = noise.u[start:m], noise.y[start:m]
+    core = (model.A, model.B, model.C, model.D)
+    cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(u))) ** 2))
+    history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None
+    for done in range(1, rounds + 1):
+        # 1. The map with the core held (its gain moved into the core).
+        linear = _linear(model, core)
+        fits = _polynomial_fits(stretch, linear, max_degree)
+        if kind == "polynomial":
+            degree = polynomial_degree(fits, stretch.effective)
+            _, c, gain, error = fits[degree - 1]
+            coefficients = [float(ck / stretch.peak ** (k - 1)) for k, ck in enumerate(c, start=1)]
+            parameters = degree - 1
+        else:
+            # Later rounds start from the last: the core moved little.
+            starts = _tanh_starts(fits, stretch.peak) if theta is None else [theta]
+            form, gain, error, theta = _tanh_fit(stretch, linear, starts)
+            parameters = 2 if form["offset"] else 1
+
+        def mapped(x):
+            if form is not None:
+                return tanh_map(x, form["scale"], form["offset"], form["gain"])
+            return np.polynomial.polynomial.polyval(x, [0.0, *coefficients])
+        A, B, C, D = core
+        core = (A, B * gain, C, D * gain)
+        # 2. The core with the map held: output error on the raw DFT of (f(u), y), the order kept.
+        data = block_data(Recording(mapped(core_u), core_y, noise.fs, noise.path), band, None)
+        oe = refine_output_error(*core, data, delay=model.delay, feedthrough=bool(model.D[0, 0]), noise_tolerance=True)
+        if np.max(np.abs(np.linalg.eigvals(oe.A))) < 1.0:
+            core = (oe.A, oe.B, oe.C, oe.D)
+        error = float(np.mean((stretch.y - stretch.through(_linear(model, core), mapped(u))) ** 2))
+        history.append(error)
+        if len(history) > 1 and history[-2] - error < _GAIN * history[-2]:
+            break
+    return HammersteinFit(*core, coefficients, form, cost_before, history[-1], parameters, done)

@@ -1,0 +1,64 @@
+"""Nonlinear drivers in the self-identified workflow (issue 28): identified on the session, named, refined to the floor.
+
+A random helmet (``sysid.random_plant``) driven through a saturating driver (s tanh(u/s), third
+harmonic -15 to -30 dB at the sweeps' amplitude) or an asymmetric one (u + a2 u^2, second harmonic
+-15 to -30 dB): the model identified on that session names input-nonlinearity among its top two
+findings, and ``refine --auto`` brings it within 1.5x of the noise floor with the core within two
+states of the true plant's order (the Hammerstein map fitted with the core, not the core inflated
+to imitate harmonics).
+"""
+
+import numpy as np
+import pytest
+from conftest import SHORT
+
+from sysid.core.model import Model
+from sysid.diagnose import diagnose
+from sysid.estimation.input_nonlinearity import harmonic_levels
+from sysid.identify import identify
+from sysid.random_plant import random_session
+from sysid.refine import format_refinement, refine_auto
+from sysid.refits.machinery import REFIT_OPTIONS
+
+
+def nonlinear_session(seed: int, path: str, shape: str, level_db: float):
+    """The session with the driver of ``shape`` whose harmonic is ``level_db`` at the sweeps' amplitude."""
+    if shape == "tanh":
+        return random_session(seed, path, effects=[f"input-nonlinearity:h3_db={level_db},h2_db=-120,tanh=1"], **SHORT)
+    # simulate states a polynomial's levels at the session's largest input (H2 grows with the amplitude).
+    probe = random_session(seed, path, **SHORT)
+    ratio = max(np.max(np.abs(r.u)) for r in (probe.noise, *probe.sweeps)) / np.max(np.abs(probe.sweeps[0].u))
+    return random_session(seed, path, effects=[f"input-nonlinearity:h2_db={level_db + 20 * np.log10(ratio):.3f},"
+                                               "h3_db=-120"], **SHORT)
+
+
+def check_refined_to_the_floor(seed, path, shape, level_db):
+    session = nonlinear_session(seed, path, shape, level_db)
+    true = Model.from_dict(session.truth["plant"])
+    sweep_amplitude = float(np.max(np.abs(session.sweeps[0].u)))
+    k = 3 if shape == "tanh" else 2
+    assert harmonic_levels(true.apply_input_nonlinearity, sweep_amplitude)[k] == pytest.approx(level_db, abs=0.2)
+    model = identify(session.noise, session.sweeps, path, REFIT_OPTIONS).model
+    findings = diagnose(model, session.noise, session.sweeps)
+    named = [f["effect"] for f in findings.significant[:2]]
+    assert "input-nonlinearity" in named, named
+    auto = refine_auto(model, session.noise, session.sweeps, REFIT_OPTIONS)
+    text = format_refinement(auto.steps, auto.stop_reason)
+    assert auto.after.ratio <= 1.5, text
+    assert abs(auto.model.order - true.order) <= 2, (true.order, text)
+    assert auto.model.input_nonlinearity_form is not None or auto.model.input_nonlinearity is not None, text
+    assert auto.model.identification["drive_limit_fs"] is None or auto.model.identification["drive_limit_fs"] > 0
+
+
+# The default run: one saturating and one asymmetric driver on small helmets of both paths.
+@pytest.mark.parametrize("seed, path, shape, level_db", [(3, "fb", "tanh", -22.0), (8, "ff", "poly", -22.0)])
+def test_nonlinear_driver_is_refined_to_the_floor(seed, path, shape, level_db):
+    check_refined_to_the_floor(seed, path, shape, level_db)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("level_db", [-15.0, -30.0])
+@pytest.mark.parametrize("shape", ["tanh", "poly"])
+@pytest.mark.parametrize("seed, path", [(5, "fb"), (6, "ff"), (13, "ff"), (20, "fb"), (22, "ff")])
+def test_nonlinear_drivers_on_random_helmets(seed, path, shape, level_db):
+    check_refined_to_the_floor(seed, path, shape, level_db)
