@@ -21,7 +21,6 @@ from pathlib import Path
 from threadpoolctl import threadpool_limits
 
 from sysid.core.files import atomic_write_text, staged_output_tree
-from sysid.estimation.grid import terminal_progress
 from sysid.identify import IdentificationOptions, identify
 from sysid.simulate import SessionSpec, simulate_session, write_session
 

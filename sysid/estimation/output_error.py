@@ -202,7 +202,6 @@ class _Projection:
         # First state of each parameter's block (the pairs' blocks first, then the real poles).
         state = np.where(j < 2 * pairs, 2 * (j // 2), j)
         is_pair = j < 2 * pairs
-        zc = z[:, None]
         pc, rc = np.flatnonzero(is_pair), np.flatnonzero(~is_pair)
         dp = pole_derivatives(x, pairs, self.margin)
         upper = self._poles[:pairs]

@@ -60,7 +60,6 @@ def refit_rms(ctx: DiagnosisContext, A, B, C, D, delay: int, max_iterations: int
     noise recording); the rms is evaluated on the sweeps' DFT bins
     (``sysid.validation.rms_from_responses``).
     """
-    model = ctx.model
     spectra = ctx.value("delay-sweep-spectra")
     with threadpool_limits(limits=1, user_api="blas"):
         fit = refine_output_error(A, B, C, D, ctx.value("delay-scan-data"), delay=delay, max_iterations=max_iterations,
