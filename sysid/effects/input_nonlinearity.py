@@ -39,6 +39,7 @@ INPUT_NONLINEARITY = register(Effect(
     simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0),
                      ParameterSpec("tanh", 0, 0, 1, "int")),
     refine_params=(ParameterSpec("degree", 7, 2, 7, "int"),),
-    detect="sysid.findings.nonlinearity:nonlinearity_finding", needs=("resonance", "highpass", "lowpass", "delay", "clipping"),
+    detect="sysid.findings.nonlinearity:nonlinearity_finding",
+    needs=("resonance", "highpass", "lowpass", "delay", "clipping"),
     build="sysid.refits:add_input_nonlinearity",
     auto_params=lambda p: {"degree": 7}, figure="harmonics", random=_random))

@@ -99,5 +99,6 @@ def test_every_detector_reads_what_its_effect_needs():
     assert effects.findings_read_by(effects.get("under-modelled").detect) is None
     assert effects.findings_read_by(effects.get("resonance").detect) == ()
     assert effects.findings_read_by(effects.get("time-variation").detect) == ("clipping",)
+    # Clipping too: harmonics of a clipped recording are the clipping's, not the driver's.
     assert effects.findings_read_by(effects.get("input-nonlinearity").detect) == ("resonance", "highpass", "lowpass",
-                                                                                    "delay")
+                                                                                    "delay", "clipping")
