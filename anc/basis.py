@@ -296,14 +296,13 @@ def qr_blocks(rows, size: int) -> tuple[np.ndarray, np.ndarray]:
     (M_b, t_b), M_b of shape (m_b, size): Householder QR of the stacked real and imaginary parts,
     updated block by block (Golub & Van Loan, "Matrix Computations", 4th ed., sec. 5.2), so memory
     stays at one block whatever the grid."""
-    R = np.zeros((0, size))
-    h = np.zeros(0)
+    # The right-hand side rides along as the last column: R of [M | t] is [[R, Q' t], [0, residual]], so Q is
+    # never formed.
+    augmented = np.zeros((0, size + 1))
     for M, t in rows:
-        stacked = np.vstack([R, M.real, M.imag])
-        rhs = np.concatenate([h, t.real, t.imag])
-        Q, R = np.linalg.qr(stacked, mode="reduced")
-        h = Q.T @ rhs
-    return R, h
+        block = np.hstack([np.vstack([M.real, M.imag]), np.concatenate([t.real, t.imag])[:, None]])
+        augmented = np.linalg.qr(np.vstack([augmented, block]), mode="r")[: size + 1]
+    return augmented[:size, :size], augmented[:size, size]
 
 
 def fit_blocks(rows, size: int) -> np.ndarray:
