@@ -53,8 +53,10 @@ def case(name: str) -> Case:
     return Case(design, bound, judge(controller, pair).per_band["ff"])
 
 
-DEFAULT = ["seed", f"random {RANDOM_FB_SEEDS[0]}"]
-SLOW = [f"random {seed}" for seed in RANDOM_FB_SEEDS[1:]]
+# One design takes minutes (a fit of about 330 Kautz functions and its balanced truncation): the seed pair in the
+# default run, the random pairs marked slow.
+DEFAULT = ["seed"]
+SLOW = [f"random {seed}" for seed in RANDOM_FB_SEEDS]
 NAMES = DEFAULT + [pytest.param(name, marks=pytest.mark.slow) for name in SLOW]
 
 
