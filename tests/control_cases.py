@@ -124,3 +124,21 @@ def judge(controller, pair: PlantPair, seconds: float = 4.0, seed: int = 7) -> J
         run = run_closed_loop(controller, pair.s, d, x, use_ff, use_fb)
         parts[part] = np.array(measured_attenuation(d, run.e, pair.s.fs))
     return Judgement(parts)
+
+
+def small_controller(latency: int | None = None, limits: dict | None = None):
+    """A controller with first-order W and Q on the seed's FB model at ``latency`` (default the board's,
+    ``anc.controller.BOARD_LATENCY_SAMPLES``), made without a design (the contract's checks need a
+    controller, not a good one)."""
+    from anc.controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
+
+    latency = BOARD_LATENCY_SAMPLES if latency is None else latency
+    s = appendix_a_model("fb")
+    n = len(band_centres())
+    q = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[-0.1]]), np.array([[0.0]]))
+    w = StateSpaceFilter(np.array([[0.2]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.01]]))
+    predicted = {part: [float(i % 3) for i in range(n)] for part in ("ff", "fb", "both")}
+    margins = {"gain_margin_db": None, "phase_margin_deg": None, "crossovers": 0, "peak_amplification_db": 1.5,
+               "peak_amplification_hz": 800.0, "robustness_factor": 2.0}
+    return Controller(s.fs, s, w, q, latency, band_centres(), predicted, margins, [40.0] * n, {"both": 3.0}, ["n"],
+                      {"source": "test"}, limits=limits)

@@ -20,25 +20,12 @@ from anc.design import WEAK_DRIVE_DB, _ff_reason, _margins, band_limits
 from anc.limits import Limits
 from anc.prediction import band_centres
 from codegen.controller import PROCESSING_LATENCY_MIN
+from control_cases import small_controller
 from helmet_anc.cli import main
 from helmet_anc.commands.design import margin_lines, table
 from sysid.core.errors import HelmetAncError
 from sysid.core.model import Model
 from sysid.core.plants import appendix_a_model
-
-
-def small_controller(latency: int = DesignOptions().latency, limits: dict | None = None) -> Controller:
-    """A controller with first-order W and Q on the seed's FB model, made without a design (the contract's
-    checks need a controller, not a good one)."""
-    s = appendix_a_model("fb")
-    n = len(band_centres())
-    q = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[-0.1]]), np.array([[0.0]]))
-    w = StateSpaceFilter(np.array([[0.2]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.01]]))
-    predicted = {part: [float(i % 3) for i in range(n)] for part in ("ff", "fb", "both")}
-    margins = {"gain_margin_db": None, "phase_margin_deg": None, "crossovers": 0, "peak_amplification_db": 1.5,
-               "peak_amplification_hz": 800.0, "robustness_factor": 2.0}
-    return Controller(s.fs, s, w, q, latency, band_centres(), predicted, margins, [40.0] * n, {"both": 3.0}, ["n"],
-                      {"source": "test"}, limits=limits)
 
 
 def _limits_record() -> dict:

@@ -53,9 +53,9 @@ def case(name: str) -> Case:
     return Case(design, bound, judge(controller, pair).per_band["ff"])
 
 
-# One design takes minutes (a fit of about 330 Kautz functions and its balanced truncation): the seed pair in the
-# default run, the random pairs marked slow.
-DEFAULT = ["seed"]
+# One design takes minutes (a fit of about 330 Kautz functions and its balanced truncation; the seed 432 s under
+# load): every pair marked slow until a design takes seconds.
+DEFAULT = [pytest.param("seed", marks=pytest.mark.slow)]
 SLOW = [f"random {seed}" for seed in RANDOM_FB_SEEDS]
 NAMES = DEFAULT + [pytest.param(name, marks=pytest.mark.slow) for name in SLOW]
 
@@ -83,6 +83,7 @@ def test_no_band_with_noise_is_made_louder(name):
     assert np.max(louder) <= BAND_TOLERANCE_DB + MEASUREMENT_DB, f"{name}: {np.round(c.judged, 1)}"
 
 
+@pytest.mark.slow
 def test_the_stored_filter_is_a_stable_reduction_of_the_fit():
     d = case("seed").design
     assert 0 < d.order <= d.full_order
