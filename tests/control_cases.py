@@ -142,3 +142,17 @@ def small_controller(latency: int | None = None, limits: dict | None = None):
                "peak_amplification_hz": 800.0, "robustness_factor": 2.0}
     return Controller(s.fs, s, w, q, latency, band_centres(), predicted, margins, [40.0] * n, {"both": 3.0}, ["n"],
                       {"source": "test"}, limits=limits)
+
+
+def predicted_small_controller(s_model: Model, p_model: Model | None, latency: int | None = None):
+    """First-order W and a small Q on ``s_model`` with the predictions ``anc.design.predict`` makes for the default
+    spectrum (with ``p_model``): a controller whose predictions are real, made in milliseconds without a design."""
+    from anc.controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
+    from anc.design import predict
+    from anc.disturbance import default_disturbance
+
+    latency = BOARD_LATENCY_SAMPLES if latency is None else latency
+    q = StateSpaceFilter(np.array([[0.9]]), np.array([[1.0]]), np.array([[-0.02]]), np.array([[-0.05]]))
+    w = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.02]]))
+    predicted, overall, coherence = predict(s_model, default_disturbance(s_model.fs, p_model), latency, q, w)
+    return Controller(s_model.fs, s_model, w, q, latency, band_centres(), predicted, {}, coherence, overall)

@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from control_cases import predicted_small_controller
 
-from anc import Controller
 from anc.closed_loop import closed_loop_poles, predicted_and_achieved, run_closed_loop
-from anc.controller import StateSpaceFilter
-from anc.design import predict
-from anc.disturbance import default_disturbance
 from anc.prediction import band_centres
 from sysid.core.plants import appendix_a_model
 
@@ -18,13 +15,8 @@ CENTRES = np.array(band_centres())
 CHECKED = (CENTRES >= 50.0) & (CENTRES <= 1000.0)
 
 
-def _controller(s, p, latency: int = 2) -> Controller:
-    """First-order W and a small Q on the seed's model, predictions from ``anc.design.predict`` (no design:
-    the loop's properties hold for any stable filters)."""
-    q = StateSpaceFilter(np.array([[0.9]]), np.array([[1.0]]), np.array([[-0.02]]), np.array([[-0.05]]))
-    w = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.02]]))
-    predicted, overall, coherence = predict(s, default_disturbance(s.fs, p), latency, q, w)
-    return Controller(s.fs, s, w, q, latency, band_centres(), predicted, {}, coherence, overall)
+def _controller(s, p, latency: int = 2):
+    return predicted_small_controller(s, p, latency)
 
 
 def test_true_model_loop_equals_prediction():
