@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
+from control_cases import board_controller
 
-from anc import DesignOptions, design
 from anc.controller import Controller
 from codegen.api import generate_controller_firmware
 from codegen.build import build_host
@@ -23,8 +23,9 @@ from sysid.core.plants import appendix_a_model
 
 @pytest.fixture(scope="module")
 def controller():
-    """The seed plants' controller for the per-sample path (latency 2)."""
-    return design(appendix_a_model("fb"), appendix_a_model("ff"), options=DesignOptions(latency=2))
+    """A controller of the board's kind on the seed plants for the per-sample path (latency 2; made without a
+    design, which takes minutes: ``control_cases.board_controller``)."""
+    return board_controller(appendix_a_model("fb"), appendix_a_model("ff"), 2)
 
 
 @pytest.fixture(scope="module")
