@@ -42,8 +42,8 @@ from .limits import feedforward_limits
 from .prediction import band_attenuation, band_centres, band_grid, coherence_bound, ear_psd, overall_dba
 from .uncertainty import Uncertainty, model_uncertainty
 
-__all__ = ["DesignOptions", "design", "predict", "band_limits", "UNDAMPED_MARGIN", "undamped_pole",
-           "WEAK_DRIVE_DB"]
+__all__ = ["DesignOptions", "design", "predict", "band_limits", "board_cost", "UNDAMPED_MARGIN", "undamped_pole",
+           "WEAK_DRIVE_DB", "BOARD_CYCLES_PER_SAMPLE", "INSTRUCTIONS_PER_SECTION", "PATH_INSTRUCTIONS"]
 
 # An FB model pole closer than this to the unit circle (a mode decaying by 1/e in over 1e6 samples,
 # 20 s at 48 kHz), other than a real pole at DC (Q's double zero), is refused: no acoustic path rings that long (the seed's FB path's slowest pole is
@@ -55,6 +55,13 @@ UNDAMPED_MARGIN = 1e-6
 # weakness when neither coherence, a zero of S nor the chin path's lead explains its bound; nearer its
 # peak nothing named explains it and nothing is said.
 WEAK_DRIVE_DB = 20.0
+# The board's budget for the control path: half of a 168 MHz Cortex-M4 at 48 kHz (cycles per sample), and
+# the emulated M4's measured cost (BENCHMARKS.md "Board control loop", Q15, QEMU trace of the real ELF,
+# 2026-11-23): 21 instructions per second-order section per sample and 66 for the path's own work
+# (d_hat, delays, limiter). Instructions are not cycles (loads take 2), so the estimate is a lower bound.
+BOARD_CYCLES_PER_SAMPLE = 1750
+INSTRUCTIONS_PER_SECTION = 21
+PATH_INSTRUCTIONS = 66
 
 
 @dataclass(frozen=True)
@@ -146,6 +153,12 @@ def band_limits(bands_hz, ff_limits, fb_bound) -> dict:
     return limits
 
 
+def board_cost(*orders: int) -> int:
+    """Estimated instructions per sample of the board's control path running filters of these orders (the
+    internal model S, Q, W): second-order sections of each at ``INSTRUCTIONS_PER_SECTION`` plus the path's own."""
+    return PATH_INSTRUCTIONS + INSTRUCTIONS_PER_SECTION * sum((int(n) + 1) // 2 for n in orders)
+
+
 def _margins(margins: dict, loop: np.ndarray) -> dict:
     """The loop's margins with the phase margin None where |Lg| never crosses 1 ("no crossover")."""
     Lg = -loop / (1.0 + loop)
@@ -234,6 +247,13 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         notes += ff_design.notes
     elif options.feedforward:
         notes.append("no feed-forward filter: no FF model and no chin-microphone spectrum")
+    cost = board_cost(fb_model.order, *(f.order for f in (fb, ff) if f is not None))
+    fits = cost <= BOARD_CYCLES_PER_SAMPLE
+    notes.append(f"board: the control path (S order {fb_model.order}, Q order {0 if fb is None else fb.order}, W order "
+                 f"{0 if ff is None else ff.order}) is estimated at {cost} instructions per sample against "
+                 f"{BOARD_CYCLES_PER_SAMPLE} cycles (half of a 168 MHz Cortex-M4 at 48 kHz)"
+                 + ("" if fits else ": it does NOT fit; design again with DesignOptions(max_order=...) for the "
+                    "order that fits, at the attenuation that costs"))
     predicted, overall, coherence = predict(fb_model, disturbance, options.latency, fb, ff)
     limits = band_limits(band_centres(), ff_limits, fb_bound)
     info = {
@@ -249,6 +269,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
                                           "tolerance: W alone against no control, W with Q against Q alone "
                                           "(predicted on the models)"},
         "robustness_bound": ROBUSTNESS_BOUND,
+        "board": {"instructions_per_sample": cost, "budget_cycles_per_sample": BOARD_CYCLES_PER_SAMPLE,
+                  "fits": fits},
         "design_seconds_cpu": time.process_time() - started,
         "step_seconds_cpu": timing,
     }

@@ -178,3 +178,12 @@ def test_cli_design_help_states_the_boards_latency(capsys):
         main(["design", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert f"default {BOARD_LATENCY_SAMPLES}: the board's control path" in text
+
+
+def test_the_board_cost_counts_sections():
+    """S order 7 and Q, W of order 22: 4 + 11 + 11 sections, as BENCHMARKS.md's measured control path
+    (620 instructions for those orders; the estimate is within 5 % of it)."""
+    from anc.design import BOARD_CYCLES_PER_SAMPLE, board_cost
+
+    assert abs(board_cost(7, 22, 22) - 620) <= 0.05 * 620
+    assert board_cost(7, 300, 300) > BOARD_CYCLES_PER_SAMPLE
