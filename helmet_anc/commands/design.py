@@ -60,12 +60,17 @@ _COMPACT = ((re.compile(r"^coherence"), lambda m: "coherence"),
              lambda m: f"chin path {m.group(1)} samples ahead"),
             (re.compile(r"zero of S outside the unit circle at z = ([0-9.]+)"), lambda m: f"zero of S at z = {m.group(1)}"),
             (re.compile(r"zero of S outside the unit circle at ([0-9.]+) Hz"), lambda m: f"zero of S at {m.group(1)} Hz"),
-            (re.compile(r"drive path (\d+) dB below"), lambda m: f"drive path -{m.group(1)} dB"))
+            (re.compile(r"drive path (\d+) dB below"), lambda m: f"drive path -{m.group(1)} dB"),
+            (re.compile(r"^the model's uncertainty"), lambda m: "the model's uncertainty"))
+# The feedback bound's reasons start with the band and its bound ("501.187 Hz: 5.8 dB, limited by ..."), which the
+# table's row already shows.
+_PREFIX = re.compile(r"^[0-9.]+ Hz: -?[0-9.]+ dB, limited by ")
 
 
 def _short(text: str) -> str:
     """A reason in compact form: a known cause's short name, else its words before any parenthesis,
     cut to ``REASON_WIDTH`` characters at a word."""
+    text = _PREFIX.sub("", text)
     for pattern, short in _COMPACT:
         found = pattern.search(text)
         if found:
@@ -88,6 +93,8 @@ def reason_lines(controller) -> list[str]:
     for name, label in (("ff", "feed-forward"), ("fb", "feedback")):
         runs: list[list] = []
         for centre, text in zip(controller.bands_hz, reasons.get(name) or []):
+            # One line per cause: the band's own figures (its bound, the gain without the cause) are in the table.
+            text = _PREFIX.sub("", text).split(" (without")[0]
             if runs and runs[-1][2] == text:
                 runs[-1][1] = centre
             else:
