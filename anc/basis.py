@@ -1,4 +1,4 @@
-"""Laguerre filter basis and the weighted least-squares fit of a filter in it.
+"""Rational filter bases (Laguerre; Kautz with any poles) and the weighted least-squares fits in them.
 
 Both controller filters are written as Q(z) = c_0 + sum_{i=1}^{n} c_i L_i(z) with the
 discrete Laguerre functions (Heuberger, Van den Hof & Wahlberg, "Modelling and
@@ -24,17 +24,30 @@ with a double zero at DC,
 (unit gain at fs / 2) so the filter has no gain at DC whatever its coefficients: the
 feedback filter needs that below the identified band, where the model is an extrapolation
 and the true path may be large (the seed's FB path has a pole at 0.9999).
+
+``KautzBasis``: the orthonormal basis of Takenaka and Malmquist for any stable poles
+(Heuberger, Van den Hof & Wahlberg 2005, ch. 2 and 3; Ninness & Gustafsson, IEEE Trans.
+Autom. Control 42(4), 1997), realised as a cascade of balanced all-pass sections, one per
+real pole or complex pair: each section's system matrix [[A_k, B_k], [C_k, D_k]] is
+orthogonal, so the cascade's states are orthonormal in H2 (their controllability Gramian is
+the identity; Roberts & Mullis, "Digital Signal Processing", 1987, sec. 9.10) and a filter
+D + sum c_i x_i is linear in (D, c). With poles placed from the paths' dynamics it holds a
+Wiener filter in a few hundred functions where a Laguerre series needs thousands, and its
+realisation is well conditioned at any size (no powers of a companion matrix). ``qr_blocks`` /
+``fit_blocks`` solve a weighted least-squares problem on a long grid by a QR factorisation
+updated one block of frequencies at a time, so memory stays at (block, functions) whatever the grid.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
 
-__all__ = ["LaguerreBasis", "fit"]
+__all__ = ["LaguerreBasis", "KautzBasis", "fit", "fit_blocks", "qr_blocks"]
 
 
 @dataclass(frozen=True)
@@ -184,3 +197,118 @@ def _barrier(g: np.ndarray, quads) -> np.ndarray:
             z = z + size * step
         t *= 10.0
     return z
+
+
+def _allpass_section(poles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Real (A, B, C, D) with an orthogonal system matrix of the all-pass prod (1 - conj(p) z) / (z - p)
+    over one real pole or one complex pair (``poles`` of length 1 or 2)."""
+    if poles.size == 1:
+        a = float(poles[0].real)
+        g = np.sqrt(1.0 - a * a)
+        return np.array([[a]]), np.array([[g]]), np.array([[g]]), np.array([[-a]])
+    p = complex(poles[0])
+    # (1 - p z)(1 - conj(p) z) / ((z - p)(z - conj(p))) = (r2 z^2 - 2 re z + 1) / (z^2 - 2 re z + r2).
+    re, r2 = p.real, abs(p) ** 2
+    num, den = np.array([r2, -2.0 * re, 1.0]), np.array([1.0, -2.0 * re, r2])
+    A, B, C, D = scipy.signal.tf2ss(num, den)
+    # Balance it: an all-pass's balanced realisation has unit Gramians and an orthogonal system matrix.
+    wc = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
+    wo = scipy.linalg.solve_discrete_lyapunov(A.T, C.T @ C)
+    lc = np.linalg.cholesky((wc + wc.T) / 2.0)
+    lo = np.linalg.cholesky((wo + wo.T) / 2.0)
+    U, s, Vt = np.linalg.svd(lo.T @ lc)
+    T = lc @ Vt.T / np.sqrt(s)
+    T_inv = (U / np.sqrt(s)).T @ lo.T
+    return T_inv @ A @ T, T_inv @ B, C @ T, D
+
+
+@dataclass(frozen=True)
+class KautzBasis:
+    """The constant plus the orthonormal functions of ``poles`` (complex poles in conjugate pairs,
+    all inside the unit circle); see the module docstring. ``size`` = 1 + len(poles)."""
+
+    poles: tuple
+
+    @classmethod
+    def from_poles(cls, poles) -> "KautzBasis":
+        """The basis of the given poles (real ones and one of each conjugate pair, or both)."""
+        poles = np.asarray(poles, dtype=complex).reshape(-1)
+        if poles.size and np.max(np.abs(poles)) >= 1.0:
+            raise ValueError(f"Kautz poles must lie inside the unit circle; found radius {np.max(np.abs(poles)):.6f}")
+        real = poles[np.abs(poles.imag) <= 1e-12 * np.maximum(np.abs(poles), 1e-300)].real
+        upper = poles[poles.imag > 1e-12 * np.maximum(np.abs(poles), 1e-300)]
+        return cls(tuple(complex(p) for p in real) + tuple(complex(p) for p in upper))
+
+    @property
+    def sections(self) -> list[np.ndarray]:
+        return [np.array([p]) if p.imag == 0.0 else np.array([p, p.conjugate()]) for p in self.poles]
+
+    @cached_property
+    def _realisations(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        return [_allpass_section(poles) for poles in self.sections]
+
+    @property
+    def size(self) -> int:
+        return 1 + sum(s.size for s in self.sections)
+
+    def responses(self, frequencies_hz, fs: float) -> np.ndarray:
+        """Complex responses (len(f), size) of [1, x_1, ..., x_n] at frequencies in Hz."""
+        z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float) / fs)
+        columns = [np.ones(z.size, dtype=complex)]
+        into = np.ones(z.size, dtype=complex)
+        for poles, (A, B, C, D) in zip(self.sections, self._realisations):
+            if poles.size == 1:
+                states = (B[0, 0] / (z - A[0, 0]))[:, None]
+            else:
+                # (z I - A)^-1 B for a 2 x 2 A, by its adjugate.
+                det = (z - A[0, 0]) * (z - A[1, 1]) - A[0, 1] * A[1, 0]
+                states = np.stack(((z - A[1, 1]) * B[0, 0] + A[0, 1] * B[1, 0],
+                                   A[1, 0] * B[0, 0] + (z - A[0, 0]) * B[1, 0]), axis=1) / det[:, None]
+            states = states * into[:, None]
+            columns.extend(states.T)
+            into = states @ C[0] + D[0, 0] * into
+        return np.stack(columns, axis=1)
+
+    def statespace(self, coefficients) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(A, B, C, D) of c_0 + sum c_i x_i: the cascade's states, section after section."""
+        c = np.asarray(coefficients, dtype=float).reshape(-1)
+        if c.size != self.size:
+            raise ValueError(f"expected {self.size} coefficients; found {c.size}")
+        n = self.size - 1
+        A, B = np.zeros((n, n)), np.zeros((n, 1))
+        # The input of the current section as (row over the states so far, gain on the filter input).
+        row, gain = np.zeros(n), 1.0
+        at = 0
+        for poles, (Ak, Bk, Ck, Dk) in zip(self.sections, self._realisations):
+            k = slice(at, at + poles.size)
+            A[k] += np.outer(Bk[:, 0], row)
+            A[k, k] += Ak
+            B[k, 0] = Bk[:, 0] * gain
+            row = Dk[0, 0] * row
+            row[k] += Ck[0]
+            gain = Dk[0, 0] * gain
+            at += poles.size
+        return A, B, c[1:].reshape(1, -1), c[:1].reshape(1, 1)
+
+
+def qr_blocks(rows, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(R, h) with |M x - t|^2 = |R x - h|^2 + const for the real x, from an iterable of complex blocks
+    (M_b, t_b), M_b of shape (m_b, size): Householder QR of the stacked real and imaginary parts,
+    updated block by block (Golub & Van Loan, "Matrix Computations", 4th ed., sec. 5.2), so memory
+    stays at one block whatever the grid."""
+    # The right-hand side rides along as the last column: R of [M | t] is [[R, Q' t], [0, residual]], so Q is
+    # never formed.
+    augmented = np.zeros((0, size + 1))
+    for M, t in rows:
+        block = np.hstack([np.vstack([M.real, M.imag]), np.concatenate([t.real, t.imag])[:, None]])
+        augmented = np.linalg.qr(np.vstack([augmented, block]), mode="r")[: size + 1]
+    return augmented[:size, :size], augmented[:size, size]
+
+
+def fit_blocks(rows, size: int) -> np.ndarray:
+    """Real x minimising sum over blocks of |M_b x - t_b|^2 (``qr_blocks``), of least norm among directions the
+    data do not determine (singular values of R below 1e-12 of the largest dropped)."""
+    R, h = qr_blocks(rows, size)
+    U, s, Vt = np.linalg.svd(R, full_matrices=False)
+    keep = s > 1e-12 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+    return Vt[keep].T @ ((U[:, keep].T @ h) / s[keep])

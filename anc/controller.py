@@ -1,9 +1,15 @@
 """The controller JSON (format helmet-anc/controller@1, design.md "Control"; binding).
 
 ``{"format", "fs", "internal_model", "ff", "fb", "latency_samples", "bands_hz",
-"predicted_attenuation_db": {"ff", "fb", "both"}}`` plus fields of ours: ``margins``,
-``coherence_bound_db``, ``predicted_overall_dba``, ``notes`` and ``provenance`` (which
-models, which spectrum, which options, the tool version). Drive:
+"predicted_attenuation_db": {"ff", "fb", "both"}}`` plus fields of ours, all optional on read
+(older files load with them empty): ``margins`` (``phase_margin_deg`` null where the loop gain never
+crosses 1, ``crossovers`` their count), ``coherence_bound_db``, ``predicted_overall_dba``, ``notes``,
+``provenance`` (which models, which spectrum, which options, the orders, the design's CPU time),
+``limits`` (per band of ``bands_hz``, dB, positive = quieter at the ear, null where not computed:
+``causal_ff_db`` the causal Wiener feed-forward bound, ``coherence_db`` the coherence bound,
+``feedback_db`` the robust feedback bound, and ``reasons`` {"ff": [...], "fb": [...]}: what limits
+each band in words, "" where no single cause is named) and ``feedback_bound`` (the feedback bound's
+own record, ``anc.feedback_bound.FeedbackBound.to_dict``). Drive:
 y[k] = W x[k-L] + Q d_hat[k-L], d_hat = e - S_model y, with W = ``ff`` and Q = ``fb``,
 discrete state-space filters at ``fs`` that carry their own sign (None = off).
 """
@@ -22,9 +28,13 @@ from sysid.core.errors import HelmetAncError
 from sysid.core.files import atomic_write_text
 from sysid.core.model import Model
 
-__all__ = ["CONTROLLER_FORMAT", "StateSpaceFilter", "Controller"]
+__all__ = ["CONTROLLER_FORMAT", "BOARD_LATENCY_SAMPLES", "StateSpaceFilter", "Controller"]
 
 CONTROLLER_FORMAT = "helmet-anc/controller@1"
+# The board's control path (firmware/anc_control.h): capture, compute and play take 2 samples, so
+# a controller for the board has latency_samples >= 2. The one place of this figure: the design's
+# default latency and codegen's check (``codegen.controller.PROCESSING_LATENCY_MIN``) read it.
+BOARD_LATENCY_SAMPLES = 2
 _PARTS = ("ff", "fb", "both")
 
 
@@ -77,6 +87,33 @@ class StateSpaceFilter:
         return lti.simulate(self.A, self.B, self.C, self.D, np.asarray(u, dtype=float))
 
 
+def _finite(data):
+    """Plain JSON of nested dicts and lists: non-finite numbers as null (JSON has no NaN)."""
+    if isinstance(data, dict):
+        return {k: _finite(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [_finite(v) for v in data]
+    if isinstance(data, (float, np.floating)):
+        return float(data) if math.isfinite(data) else None
+    if isinstance(data, np.integer):
+        return int(data)
+    return data
+
+
+def _limits(data) -> dict | None:
+    """The optional ``limits`` field as read: None, or per-band lists as long as ``bands_hz``."""
+    if data is None:
+        return None
+    if not isinstance(data, dict) or not isinstance(data.get("bands_hz"), list):
+        raise HelmetAncError("controller field 'limits' must be null or an object with bands_hz")
+    n = len(data["bands_hz"])
+    for key in ("causal_ff_db", "coherence_db", "feedback_db"):
+        values = data.get(key, [None] * n)
+        if not isinstance(values, list) or len(values) != n:
+            raise HelmetAncError(f"controller field 'limits': {key} must hold one value per band ({n})")
+    return data
+
+
 @dataclass
 class Controller:
     """A designed controller; ``to_dict``/``from_dict`` are the JSON contract (module docstring)."""
@@ -93,6 +130,8 @@ class Controller:
     predicted_overall_dba: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     provenance: dict = field(default_factory=dict)
+    limits: dict | None = None
+    feedback_bound: dict | None = None
 
     def __post_init__(self):
         if not (isinstance(self.latency_samples, (int, np.integer)) and self.latency_samples >= 1):
@@ -125,6 +164,8 @@ class Controller:
             "predicted_overall_dba": self.predicted_overall_dba,
             "notes": list(self.notes),
             "provenance": self.provenance,
+            "limits": _finite(self.limits),
+            "feedback_bound": _finite(self.feedback_bound),
         }
 
     @classmethod
@@ -149,6 +190,8 @@ class Controller:
             predicted_overall_dba=data.get("predicted_overall_dba", {}),
             notes=list(data.get("notes", [])),
             provenance=data.get("provenance", {}),
+            limits=_limits(data.get("limits")),
+            feedback_bound=data.get("feedback_bound"),
         )
 
     def save(self, path: str | os.PathLike) -> None:

@@ -1,26 +1,24 @@
-"""Feedback filter Q for internal model control, robust against the model's uncertainty.
+"""Feedback filter Q for internal model control: the bound's filter at an order the board runs.
 
-With the runtime's disturbance observer d_hat = e - S_model y and y[k] = Q d_hat[k-L],
-a perfect model gives e = (1 + G Q) d with G = z^-L S_model (the loop is open: d_hat = d);
-a model error Delta = S - S_model closes a loop y = z^-L Q (d + Delta y), stable whenever
-|Delta Q| < 1 at every frequency (small-gain theorem).
+With the runtime's observer d_hat = e - S_model y and y[k] = Q d_hat[k-L], a perfect model
+gives e = (1 + G Q) d with G = z^-L S_model (the loop is open: d_hat = d); a model error
+Delta = S - S_model closes a loop y = z^-L Q (d + Delta y), stable whenever |Delta Q| < 1 at
+every frequency (small-gain theorem), which r95 |G Q| <= ``ROBUSTNESS_BOUND`` (0.5) keeps with
+margin 2 for every path within the model's 95 % band.
 
-Criterion (``design_feedback``): over Q in the Laguerre family (``anc.basis``) minimise the
-disturbance-weighted expected ear power
-
-.. math::
-    J(Q) = \\sum_k \\Phi_d(f_k) \\left( |1 + G Q|^2 + s^2 |G Q|^2 \\right),
-    \\qquad s = r_{95} / 1.73,
-
-(s the RMS relative model error: a complex Gaussian error exceeds 1.73 times its RMS
-with probability 5 %) subject to
-
-* robust stability with margin 2: r_95(f) |S_model(f)| |Q(f)| <= 0.5 at every frequency,
-* a bounded waterbed: |1 + G Q| <= ``max_amplification_db`` (default 6 dB).
-
-The constraints are imposed by iteratively reweighting a penalty on |Q|^2 (robustness) and
-the weight on |1 + G Q|^2 (amplification) where they are violated, then guaranteed for the
-robustness bound by scaling Q down if a violation is left on the grid.
+``design_feedback``: (1) the bound (``anc.feedback_bound``: the best band-normalised ear power
+of any Q of a rich family under the amplification limit per band and the robustness bound);
+(2) the same program with the bounds tightened by ``DESIGN_MARGIN_DB`` and ``DESIGN_ROBUSTNESS``,
+whose optimum leaves room for (3) balanced truncation (Moore 1981;
+``sysid.core.lti.minimal_balanced_realisation``) of Q without its DC block to the lowest order
+whose predicted attenuation in every judged band (third-octave 50 Hz-1 kHz) is within
+``REDUCTION_TOLERANCE_DB`` of the full filter's and whose loop keeps both stated bounds on
+``dense_grid`` (|1 + G Q| within the limit of every band 20 Hz-10 kHz, the edge bands' limits
+beyond, and r95 |G Q| <= ``DENSE_MARGIN`` times the robustness bound); (4) the DC block in
+series again, so Q keeps its double zero at DC at any order (below the identified band the path
+is unknown: the seed's FB path has a pole at 0.9999 and 30 times its 20 Hz gain at DC).
+The design states where its loop amplifies (``amplification_db`` per band) and says so in its
+notes for every band above 0 dB, naming the speech band.
 """
 
 from __future__ import annotations
@@ -29,67 +27,60 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sysid.core.lti import minimal_balanced_realisation
 from sysid.core.model import Model
+from sysid.core.structures import series
 
-from .basis import LaguerreBasis, fit
+from .controller import StateSpaceFilter
 from .disturbance import Disturbance
+from .feedback_bound import (LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackProblem, amplification_limit,
+                             dense_grid, design_grid, feedback_bound, feedback_problem)
+from .prediction import BANDS, band_attenuation, band_grid
 from .uncertainty import Uncertainty
 
-__all__ = ["FeedbackDesign", "design_feedback", "dense_grid", "loop_margins", "ROBUSTNESS_BOUND", "RMS_PER_95"]
+__all__ = ["FeedbackDesign", "design_feedback", "dense_grid", "design_grid", "loop_margins", "ROBUSTNESS_BOUND",
+           "RMS_PER_95", "DESIGN_MARGIN_DB", "DESIGN_ROBUSTNESS", "DENSE_MARGIN", "REDUCTION_TOLERANCE_DB",
+           "SPEECH_BAND_HZ"]
 
-ROBUSTNESS_BOUND = 0.5
 RMS_PER_95 = 1.0 / np.sqrt(np.log(20.0))
-_ITERATIONS = 40
+# The design's amplification limit lies this far below the stated one and its robustness bound at this
+# fraction of the stated one: what the truncated filter may use of the stated bounds.
+DESIGN_MARGIN_DB = 0.3
+DESIGN_ROBUSTNESS = 0.9
+# The stored filter keeps r95 |G Q| within this fraction of the bound on the dense grid (1 % for what lies
+# between its points: a 4x finer grid found 0.07 % more than the dense grid on the seed).
+DENSE_MARGIN = 0.99
+REDUCTION_TOLERANCE_DB = 0.5
+# Where a listener hears speech (telephone band): amplification there is named in the notes as such.
+SPEECH_BAND_HZ = (300.0, 3400.0)
 
 
 @dataclass
 class FeedbackDesign:
-    """Q = basis with ``coefficients``; responses on ``frequencies_hz``; margins and notes (why it is as it is)."""
+    """The stored Q (``filter``: balanced, reduced, double zero at DC) and what it does on the model.
 
-    basis: LaguerreBasis
-    coefficients: np.ndarray
+    ``predicted_db``: attenuation per band of ``anc.prediction.BANDS`` (third-octave 20 Hz-2 kHz), as
+    ``anc.design.predict`` computes it; ``amplification_db``: the largest 20 log10 |1 + G Q| per band of
+    ``LIMIT_BANDS`` (20 Hz-10 kHz) on the dense grid, against ``amplification_limit_db``; the loop G Q
+    on ``frequencies_hz`` (``design_grid``); ``bound``: the feedback bound; ``reduction``: orders and
+    the largest band change of the truncation; ``margins`` and ``notes`` (why it is as it is)."""
+
+    filter: StateSpaceFilter
+    bound: FeedbackBound
+    predicted_db: np.ndarray
+    amplification_db: np.ndarray
+    amplification_limit_db: np.ndarray
     frequencies_hz: np.ndarray
-    loop: np.ndarray           # G Q = z^-L S_model Q
-    relative_95: np.ndarray    # r_95 on the grid
+    loop: np.ndarray
+    relative_95: np.ndarray
+    reduction: dict = field(default_factory=dict)
     margins: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
     @property
     def sensitivity(self) -> np.ndarray:
-        """1 + G Q: ear noise with control over ear noise without (nominal model)."""
+        """1 + G Q on ``frequencies_hz``: ear noise with control over ear noise without (nominal model)."""
         return 1.0 + self.loop
-
-
-def design_grid(fs: float, points: int = 4096) -> np.ndarray:
-    """Design grid (Hz): DC, 32 log-spaced points from 0.5 Hz, then uniform from fs / (2 points) to fs / 2.
-
-    The uniform part is fine enough for 20 Hz bands at 48 kHz; the points below it hold Q's
-    gain near DC, where the model is an extrapolation and a loop can drift unstable.
-    """
-    uniform = np.linspace(fs / (2 * points), fs / 2.0, points)
-    return np.concatenate(([0.0], np.geomspace(0.5, uniform[0], 33)[:-1], uniform))
-
-
-def dense_grid(model: Model, bins: int = 8192) -> np.ndarray:
-    """Frequencies (Hz) on which the stored Q's robustness is verified (``anc.design``): every bin of
-    a 2 * ``bins``-point FFT (fs / 16384 apart: 2.9 Hz at 48 kHz, twice the design grid's density),
-    ``bins`` log-spaced points from 0.1 Hz (0.15 % apart) and, around each pole of the
-    model, 41 points spanning +-4 half-power bandwidths (|ln r| fs / pi each; at least 1e-6 Hz),
-    where a lightly damped mode's peak lies between the bins (design grid: fs / 8192 apart), and
-    the design grid itself."""
-    fs = model.fs
-    # Log-spaced points as well: below a few tens of hertz the bound where nothing is known
-    # (``anc.uncertainty``) changes faster than the bins resolve (0.5004 at 7.91 Hz on the seed
-    # between bins that saw 0.5).
-    points = [np.linspace(0.0, fs / 2.0, bins + 1), np.geomspace(0.1, fs / 2.0, bins)]
-    if model.order:
-        poles = np.linalg.eigvals(model.A)
-        poles = poles[np.abs(poles) > 0]
-        centre = np.abs(np.angle(poles)) * fs / (2.0 * np.pi)
-        width = np.maximum(np.abs(np.log(np.abs(poles))) * fs / np.pi, 1e-6)
-        points.append((centre[:, None] + 4.0 * width[:, None] * np.linspace(-1.0, 1.0, 41)[None, :]).reshape(-1))
-    f = np.concatenate(points + [design_grid(fs)])
-    return np.unique(f[(f >= 0.0) & (f <= fs / 2.0)])
 
 
 def loop_margins(loop: np.ndarray, frequencies_hz: np.ndarray, relative_95: np.ndarray, s_model_q: np.ndarray) -> dict:
@@ -126,69 +117,128 @@ def loop_margins(loop: np.ndarray, frequencies_hz: np.ndarray, relative_95: np.n
     }
 
 
-def _ranges(frequencies_hz: np.ndarray, mask: np.ndarray) -> str:
-    """'600-2000 Hz, 5000-22050 Hz' for the runs where mask is true."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(int), [0]))))
-    return ", ".join(f"{frequencies_hz[a]:.0f}-{frequencies_hz[b - 1]:.0f} Hz" for a, b in zip(edges[::2], edges[1::2]))
+def _dc_block(family) -> tuple:
+    """(A, B, C, D) of the family's DC block H (``anc.feedback_bound.FeedbackFamily``)."""
+    b = family.highpass_pole
+    g = ((1.0 + b) / 2.0) ** 2
+    return (np.array([[2.0 * b, -b * b], [1.0, 0.0]]), np.array([[1.0], [0.0]]),
+            g * np.array([[2.0 * b - 2.0, 1.0 - b * b]]), np.array([[g]]))
+
+
+def _reduced(problem: FeedbackProblem, coefficients: np.ndarray, limit_dense: np.ndarray,
+             robustness_bound: float) -> tuple[StateSpaceFilter, dict]:
+    """The lowest-order truncation of Q that keeps the judged bands and the bounds (module docstring),
+    balanced once more with its DC block."""
+    family = problem.family
+    fs = family.outer.fs
+    balanced = minimal_balanced_realisation(*series(family.basis.statespace(coefficients),
+                                                    family.outer.inverse_statespace()))
+    full_order = balanced.A.shape[0]
+    f_obj = problem.objective_hz.reshape(-1)
+    highpass = _dc_block(family)
+
+    def truncated(order: int) -> StateSpaceFilter:
+        # Balanced truncation: the leading block of the balanced realisation (Moore 1981).
+        part = (balanced.A[:order, :order], balanced.B[:order], balanced.C[:, :order], np.array([[balanced.D]]))
+        return StateSpaceFilter(*series(part, highpass))
+
+    def judged_db(q: StateSpaceFilter) -> np.ndarray:
+        return -10.0 * np.log10(problem.band_ratios(problem.objective_g * q.frequency_response(f_obj, fs)))
+
+    reference = judged_db(truncated(full_order))
+    radius = DENSE_MARGIN * robustness_bound / np.maximum(problem.relative_95, 1e-300)
+    chosen, change = full_order, 0.0
+    for order in range(1, full_order + 1):
+        candidate = truncated(order)
+        change = float(np.max(np.abs(judged_db(candidate) - reference)))
+        if change > REDUCTION_TOLERANCE_DB or np.max(np.abs(np.linalg.eigvals(candidate.A))) >= 1.0:
+            continue
+        loop = problem.dense_g * candidate.frequency_response(problem.dense_hz, fs)
+        if np.all(np.abs(1.0 + loop) <= limit_dense) and np.all(np.abs(loop) <= radius):
+            chosen = order
+            break
+    whole = minimal_balanced_realisation(*series(
+        (balanced.A[:chosen, :chosen], balanced.B[:chosen], balanced.C[:, :chosen], np.array([[balanced.D]])), highpass))
+    q = StateSpaceFilter(whole.A, whole.B, whole.C, np.array([[whole.D]]))
+    return q, {"order": q.order, "full_order": full_order + 2, "max_band_change_db": change if chosen < full_order else 0.0,
+               "tolerance_db": REDUCTION_TOLERANCE_DB}
+
+
+def _band_peaks(frequencies_hz: np.ndarray, amplification_db: np.ndarray) -> np.ndarray:
+    """The largest value of amplification_db inside each band of ``LIMIT_BANDS`` (the edge bands reaching to
+    DC and to fs / 2, as their limits do)."""
+    edges = np.array([hi for _, _, hi in LIMIT_BANDS[:-1]])
+    band = np.searchsorted(edges, frequencies_hz, side="right")
+    peaks = np.full(len(LIMIT_BANDS), -np.inf)
+    np.maximum.at(peaks, band, amplification_db)
+    return peaks
+
+
+def _amplification_notes(amplification_db: np.ndarray, limit_db: np.ndarray) -> list[str]:
+    """Where the loop amplifies (above 0 dB), per band of ``LIMIT_BANDS``, the speech band named."""
+    louder = [(centre, a, lim) for (centre, _, _), a, lim in zip(LIMIT_BANDS, amplification_db, limit_db) if a > 0.0]
+    if not louder:
+        return ["Q amplifies in no band 20 Hz-10 kHz (|1 + G Q| <= 1 on the model)"]
+    speech = [(c, a) for c, a, _ in louder if SPEECH_BAND_HZ[0] <= c <= SPEECH_BAND_HZ[1]]
+    listed = ", ".join(f"{c:g} Hz +{a:.1f} dB (limit {lim:g})" for c, a, lim in louder)
+    notes = [f"Q amplifies (the waterbed: Bode's sensitivity integral) by at most the stated limit per band, "
+             f"at {listed}"]
+    if speech:
+        notes.append(f"of which in the speech band {SPEECH_BAND_HZ[0]:g}-{SPEECH_BAND_HZ[1]:g} Hz: "
+                     + ", ".join(f"{c:g} Hz +{a:.1f} dB" for c, a in speech)
+                     + "; lower the limit of those bands (max_amplification_db per band) to move it elsewhere")
+    return notes
 
 
 def design_feedback(s_model: Model, disturbance: Disturbance, latency: int, uncertainty: Uncertainty,
-                    basis: LaguerreBasis, max_amplification_db: float = 6.0) -> FeedbackDesign:
-    """Robust IMC feedback filter Q for the model s_model (criterion: module docstring)."""
+                    max_amplification_db=6.0, robustness_bound: float = ROBUSTNESS_BOUND,
+                    explain: bool = True) -> FeedbackDesign:
+    """Robust IMC feedback filter Q for the model (module docstring) and its bound.
+
+    ``disturbance``: the ear noise with ANC off (its ear spectrum is the criterion's weight within each
+    band); ``latency`` in samples; ``max_amplification_db``: one number or one per band of
+    ``anc.feedback_bound.LIMIT_BANDS`` (third-octave 20 Hz-10 kHz); ``explain``: measure what limits
+    each band of the bound (``anc.feedback_bound.feedback_bound``).
+    """
     fs = s_model.fs
-    # The design grid plus 160 log-spaced points 0.5-200 Hz (2.3 % apart), where the bound where
-    # nothing is known changes faster than the uniform step and jumps at the stated band's lower
-    # edge (between grid points the seed's Q reached 0.77 at 19.5 Hz and 0.536 at 7.8 Hz without
-    # them). They carry the bounds only: the criterion's sum stays the design grid's. (Points just
-    # either side of the edge as well gave the seed a Q with a notch at 20 Hz whose float32
-    # coefficients codegen refuses: 27.8 dB SNR against 30.)
-    low = np.geomspace(0.5, 200.0, 160)
-    grid = design_grid(fs)
-    f = np.unique(np.concatenate((grid, low)))
-    G = s_model.frequency_response(f) * np.exp(-2j * np.pi * f * latency / fs)
-    phi = np.maximum(disturbance.at(f).ear_psd, 0.0)
-    phi = (phi + 1e-6 * phi.max()) * np.isin(f, grid)
-    r95 = uncertainty.at(f)
-    s2 = (r95 * RMS_PER_95) ** 2
-    basis_f = basis.responses(f, fs)
-    bound = 10.0 ** (max_amplification_db / 20.0)
-    scale = float(np.sum(phi * np.abs(G) ** 2) / grid.size)
-    weight = phi.copy()
-    robust_penalty = np.zeros_like(f)
-    for _ in range(_ITERATIONS):
-        c = fit(basis_f, G, np.ones_like(G), weight, phi * s2 * np.abs(G) ** 2 + robust_penalty + 1e-9 * scale)
-        Q = basis_f @ c
-        usage = r95 * np.abs(G * Q) / ROBUSTNESS_BOUND
-        amplification = np.abs(1.0 + G * Q) / bound
-        if usage.max() <= 1.0 and amplification.max() <= 1.0:
-            break
-        # Raise the penalty where a bound is broken (by the square of the excess, twice over:
-        # the fit then moves most of the way to the bound in one step).
-        over = usage > 1.0
-        robust_penalty[over] = np.maximum(robust_penalty[over], 1e-3 * scale) * usage[over] ** 4
-        over = amplification > 1.0
-        weight[over] = np.maximum(weight[over], 1e-3 * phi.max()) * amplification[over] ** 4
+    problem = feedback_problem(s_model, disturbance, latency, uncertainty, max_amplification_db, robustness_bound)
+    bound = feedback_bound(s_model, disturbance, latency, uncertainty, max_amplification_db, robustness_bound,
+                           explain, problem)
+    limit_dense = problem.limit
+    tight = problem.limit * 10.0 ** (-DESIGN_MARGIN_DB / 20.0)
+    design_problem = FeedbackProblem(**{**problem.__dict__, "limit": tight,
+                                        "robustness_bound": DESIGN_ROBUSTNESS * problem.robustness_bound})
+    coefficients = design_problem.solve(start=bound.coefficients)
+    q, reduction = _reduced(problem, coefficients, limit_dense, problem.robustness_bound)
     notes = []
-    excess = usage.max()
-    if excess > 1.0:
-        c = c / excess
-        Q = basis_f @ c
-        notes.append(f"Q scaled by {1 / excess:.3f} so that r95 |S_model Q| <= {ROBUSTNESS_BOUND} on the whole grid")
-    loop = G * Q
-    usage = r95 * np.abs(loop) / ROBUSTNESS_BOUND
-    outside = (f < uncertainty.band_hz[0]) | (f > uncertainty.band_hz[1])
-    peak = "" if uncertainty.peak is None else f" (peak {uncertainty.peak:.3g})"
-    if np.any(outside):
-        notes.append(f"outside the model's stated band {uncertainty.band_hz[0]:.0f}-{uncertainty.band_hz[1]:.0f} Hz "
-                     f"({uncertainty.source}) nothing is known of S: only a gain no larger than the model vouches for "
-                     f"in band{peak}, growing at most as 1/f below it, is assumed, and |Q| <= 0.5 / (|S_model| + that "
-                     "gain) there")
-    unreliable = uncertainty.unknown(f) & ~outside
-    if np.any(unreliable):
-        notes.append("conservative where the model's stated 95 % error reaches 100 % (the band is a first-order bound "
-                     "and no bound there; feedback does almost nothing) at " + _ranges(f, unreliable))
-    active = usage > 0.9
-    if np.any(active):
-        notes.append("robustness bound active (gain limited by the model's uncertainty) at " + _ranges(f, active))
-    margins = loop_margins(loop, f, r95, loop)
-    return FeedbackDesign(basis, c, f, loop, r95, margins, notes)
+    if reduction["order"] == reduction["full_order"]:
+        notes.append(f"Q kept at its full order {reduction['order']}: no truncation kept the judged bands within "
+                     f"{REDUCTION_TOLERANCE_DB} dB and the bounds")
+    else:
+        notes.append(f"Q truncated from order {reduction['full_order']} to {reduction['order']} (balanced "
+                     f"truncation): judged bands within {reduction['max_band_change_db']:.2f} dB of the full filter's")
+    # Predictions as anc.design.predict makes them, on the stored filter.
+    grid = band_grid()
+    f = grid.reshape(-1)
+    G = s_model.frequency_response(f) * np.exp(-2j * np.pi * f * latency / fs)
+    off = np.maximum(disturbance.at(f).ear_psd, 0.0)
+    on = np.abs(1.0 + G * q.frequency_response(f, fs)) ** 2 * off
+    predicted = np.array(band_attenuation(off.reshape(grid.shape), on.reshape(grid.shape)))
+    dense_loop = problem.dense_g * q.frequency_response(problem.dense_hz, fs)
+    amplification = _band_peaks(problem.dense_hz, 20.0 * np.log10(np.abs(1.0 + dense_loop)))
+    limit_db = amplification_limit([c for c, _, _ in LIMIT_BANDS], max_amplification_db)
+    notes += _amplification_notes(amplification, limit_db)
+    f_design = design_grid(fs)
+    loop = s_model.frequency_response(f_design) * np.exp(-2j * np.pi * f_design * latency / fs) \
+        * q.frequency_response(f_design, fs)
+    r95 = uncertainty.at(f_design)
+    margins = loop_margins(loop, f_design, r95, loop)
+    usage = problem.relative_95 * np.abs(dense_loop)
+    margins.update({"robustness_factor_dense": float(problem.robustness_bound / max(float(usage.max()), 1e-300)),
+                    "robustness_worst_hz": float(problem.dense_hz[int(np.argmax(usage))]),
+                    "robustness_points": int(problem.dense_hz.size)})
+    judged = np.array([BANDS.index(b) for b in BANDS if b[0] in set(bound.bands_hz)])
+    notes.append(f"feedback bound {bound.mean_db:.1f} dB (mean over the third-octave bands 50 Hz-1 kHz; "
+                 f"{DESIGN_MARGIN_DB} dB and {1 - DESIGN_ROBUSTNESS:.0%} inside its bounds, the design predicts "
+                 f"{float(np.mean(predicted[judged])):.1f} dB)")
+    return FeedbackDesign(q, bound, predicted, amplification, limit_db, f_design, loop, r95, reduction, margins, notes)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from anc.controller import Controller
+from anc.controller import BOARD_LATENCY_SAMPLES, Controller
 from sysid.core.model import Model
 
 from .errors import CodegenError
@@ -43,7 +43,7 @@ __all__ = ["CONTROL_BLOCK_MAX", "FILTER_NAMES", "ControllerPlan", "format_headro
 FILTER_NAMES = {"model": "ctl_s", "fb": "ctl_q", "ff": "ctl_w"}
 # The control path's processing latency is 2 blocks of 1 to 4 frames (firmware/anc_control.h).
 CONTROL_BLOCK_MAX = 4
-PROCESSING_LATENCY_MIN = 2
+PROCESSING_LATENCY_MIN = BOARD_LATENCY_SAMPLES
 _LABELS = {"model": "internal model S", "fb": "controller Q", "ff": "controller W"}
 
 

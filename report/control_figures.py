@@ -1,4 +1,8 @@
-"""Figures of a controller: sensitivity, Nyquist with the uncertainty discs, attenuation per band.
+"""Figures of a controller: sensitivity, Nyquist with the uncertainty discs, attenuation per band against the limits.
+
+The attenuation figure and table read the limits the controller records (``Controller.limits``: the
+causal feed-forward bound, the coherence bound, the robust feedback bound and what limits each band);
+nothing is designed again here.
 
 Drawn on ``matplotlib.figure.Figure`` with the report's shared look (``report.style``),
 no pyplot state. ``control_page`` puts them on one standalone HTML page (``design --report``)
@@ -80,13 +84,48 @@ def attenuation_figure(controller: Controller, achieved: dict[str, list[float]] 
         ax.semilogx(centres, values, color=colours[part], label=f"{part} predicted")
         if achieved and part in achieved:
             ax.semilogx(centres, achieved[part], "o", color=colours[part], markersize=4, label=f"{part} achieved")
-    if controller.coherence_bound_db is not None:
+    limits = controller.limits or {}
+    drawn = False
+    for key, label, style, colour in (("causal_ff_db", "causal feed-forward bound", "--", "tab:blue"),
+                                      ("coherence_db", "coherence bound", "--", "0.6"),
+                                      ("feedback_db", "robust feedback bound", ":", "tab:red")):
+        values = _values(limits.get(key))
+        if values is not None and np.any(np.isfinite(values)):
+            ax.semilogx(centres, values, color=colour, linestyle=style, label=label)
+            drawn = drawn or key == "coherence_db"
+    if not drawn and controller.coherence_bound_db is not None:
         ax.semilogx(centres, controller.coherence_bound_db, color="0.6", linestyle="--", label="coherence bound")
     ax.axhline(0.0, color="0.3", linewidth=0.6)
     ax.set_xlabel("third-octave band centre (Hz)")
     ax.set_ylabel("attenuation (dB, positive = quieter)")
     ax.legend(fontsize="small", ncol=2)
     return figure
+
+
+def _values(values) -> np.ndarray | None:
+    """Per-band values with None as NaN (not drawn), or None."""
+    return None if values is None else np.array([np.nan if v is None else float(v) for v in values])
+
+
+def _cell(value) -> str:
+    return "<td></td>" if value is None or not np.isfinite(float(value)) else f"<td>{float(value):.1f}</td>"
+
+
+def _reasons(controller: Controller, i: int) -> str:
+    reasons = (controller.limits or {}).get("reasons", {})
+    return "; ".join(f"{name}: {reasons[name][i]}" for name in ("ff", "fb") if reasons.get(name) and reasons[name][i])
+
+
+def _margin_items(margins: dict) -> str:
+    """The margins as list items; no phase margin where the loop gain never crosses 1."""
+    items = []
+    for key, value in margins.items():
+        if key == "phase_margin_deg" and value is None:
+            value = "no crossover (loop gain below 1 at every frequency)"
+        elif key == "gain_margin_db" and value is None:
+            value = "none (the loop never crosses the negative real axis)"
+        items.append(f"<li>{escape(key)}: {escape(str(value))}</li>")
+    return "".join(items)
 
 
 def _img(figure, dpi: float, caption: str) -> str:
@@ -133,20 +172,30 @@ def control_section(controller: Controller, achieved: dict[str, list[float]] | N
     predicted vs achieved, sensitivity, Nyquist with the uncertainty discs) and, with ``steps``
     (``anc.refinement.attenuation_along``), the refinement table and figure."""
     parts = ("ff", "fb", "both")
+    limits = controller.limits or {}
+    bounds = [(key, label) for key, label in (("causal_ff_db", "causal ff bound"), ("coherence_db", "coherence bound"),
+                                              ("feedback_db", "feedback bound")) if limits.get(key) is not None]
     head = "<tr><th>band (Hz)</th>" + "".join(f"<th>{p} predicted (dB)</th>" for p in parts)
-    head += "".join(f"<th>{p} achieved (dB)</th>" for p in parts if achieved and p in achieved) + "</tr>"
+    head += "".join(f"<th>{p} achieved (dB)</th>" for p in parts if achieved and p in achieved)
+    head += "".join(f"<th>{label} (dB)</th>" for _, label in bounds) + ("<th>what limits it</th>" if limits else "")
+    head += "</tr>"
     rows = "".join(f"<tr><td>{c:g}</td>" + "".join(f"<td>{controller.predicted_attenuation_db[p][i]:.1f}</td>"
                                                   for p in parts)
-                   + "".join(f"<td>{achieved[p][i]:.1f}</td>" for p in parts if achieved and p in achieved) + "</tr>"
+                   + "".join(f"<td>{achieved[p][i]:.1f}</td>" for p in parts if achieved and p in achieved)
+                   + "".join(_cell(limits[key][i]) for key, _ in bounds)
+                   + (f'<td class="text">{escape(_reasons(controller, i))}</td>' if limits else "") + "</tr>"
                    for i, c in enumerate(controller.bands_hz))
-    margins = "".join(f"<li>{escape(k)}: {escape(str(v))}</li>" for k, v in controller.margins.items())
+    margins = _margin_items(controller.margins)
     notes = "".join(f"<li>{escape(n)}</li>" for n in controller.notes)
+    sign = ("<p>Attenuation in dB, positive = quieter at the ear. The limits are those the paths allow for the "
+            "design's noise at its latency, as the controller records them.</p>")
     figures = [_img(attenuation_figure(controller, achieved, dpi), dpi,
-                    "Attenuation per third-octave band: predicted (lines)" + (", achieved (markers)" if achieved else ""))]
+                    "Attenuation per third-octave band: predicted (lines)" + (", achieved (markers)" if achieved else "")
+                    + (", against the limits (dashed, dotted)" if limits else ""))]
     if controller.fb is not None:
         figures += [_img(sensitivity_figure(controller, dpi), dpi, "Sensitivity |1 + G Q| and robustness usage"),
                     _img(nyquist_figure(controller, dpi), dpi, "Nyquist plot of the loop with the 95 % uncertainty discs")]
-    body = (f"<p>{escape(achieved_note)}</p>" if achieved_note else "") + (
+    body = sign + (f"<p>{escape(achieved_note)}</p>" if achieved_note else "") + (
         '<div class="scroll"><table class="numbers">' + head + rows + "</table></div>"
         f"<h3>Margins</h3><ul>{margins}</ul><h3>Notes</h3><ul>{notes}</ul>" + "".join(figures))
     if steps:

@@ -124,3 +124,66 @@ def judge(controller, pair: PlantPair, seconds: float = 4.0, seed: int = 7) -> J
         run = run_closed_loop(controller, pair.s, d, x, use_ff, use_fb)
         parts[part] = np.array(measured_attenuation(d, run.e, pair.s.fs))
     return Judgement(parts)
+
+
+def small_controller(latency: int | None = None, limits: dict | None = None):
+    """A controller with first-order W and Q on the seed's FB model at ``latency`` (default the board's,
+    ``anc.controller.BOARD_LATENCY_SAMPLES``), made without a design (the contract's checks need a
+    controller, not a good one)."""
+    from anc.controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
+
+    latency = BOARD_LATENCY_SAMPLES if latency is None else latency
+    s = appendix_a_model("fb")
+    n = len(band_centres())
+    q = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[-0.1]]), np.array([[0.0]]))
+    w = StateSpaceFilter(np.array([[0.2]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.01]]))
+    predicted = {part: [float(i % 3) for i in range(n)] for part in ("ff", "fb", "both")}
+    margins = {"gain_margin_db": None, "phase_margin_deg": None, "crossovers": 0, "peak_amplification_db": 1.5,
+               "peak_amplification_hz": 800.0, "robustness_factor": 2.0}
+    return Controller(s.fs, s, w, q, latency, band_centres(), predicted, margins, [40.0] * n, {"both": 3.0}, ["n"],
+                      {"source": "test"}, limits=limits)
+
+
+def predicted_small_controller(s_model: Model, p_model: Model | None, latency: int | None = None):
+    """First-order W and a small Q on ``s_model`` with the predictions ``anc.design.predict`` makes for the default
+    spectrum (with ``p_model``): a controller whose predictions are real, made in milliseconds without a design."""
+    from anc.controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
+    from anc.design import predict
+    from anc.disturbance import default_disturbance
+
+    latency = BOARD_LATENCY_SAMPLES if latency is None else latency
+    q = StateSpaceFilter(np.array([[0.9]]), np.array([[1.0]]), np.array([[-0.02]]), np.array([[-0.05]]))
+    w = StateSpaceFilter(np.array([[0.5]]), np.array([[1.0]]), np.array([[0.05]]), np.array([[0.02]]))
+    predicted, overall, coherence = predict(s_model, default_disturbance(s_model.fs, p_model), latency, q, w)
+    return Controller(s_model.fs, s_model, w, q, latency, band_centres(), predicted, {}, coherence, overall)
+
+
+def board_controller(s_model: Model, p_model: Model | None, latency: int | None = None):
+    """A controller of the size the board runs, made without a design (a design takes minutes): Q a 6th-order
+    band-pass 50-500 Hz (its zeros at DC, as a designed Q's; 8 dB quieter at 160 Hz with the seed's S), W an
+    8th-order low-pass at 1 kHz, both balanced realisations, with the predictions ``anc.design.predict``
+    makes for the default spectrum. For the code generator's and the firmware's checks, which need
+    filters of a designed controller's kind."""
+    import scipy.signal
+
+    from anc.controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
+    from anc.design import predict
+    from anc.disturbance import default_disturbance
+    from sysid.core.lti import minimal_balanced_realisation
+    from sysid.core.structures import series, tf_to_statespace
+
+    latency = BOARD_LATENCY_SAMPLES if latency is None else latency
+    fs = s_model.fs
+
+    def balanced(sos, gain):
+        # Section by section in series: one transfer function of the whole is ill-conditioned at these corners.
+        system = tf_to_statespace(gain * sos[0, :3], sos[0, 3:])
+        for section in sos[1:]:
+            system = series(system, tf_to_statespace(section[:3], section[3:]))
+        r = minimal_balanced_realisation(*system)
+        return StateSpaceFilter(r.A, r.B, r.C, np.array([[float(np.asarray(r.D).reshape(-1)[0])]]))
+
+    q = balanced(scipy.signal.butter(3, [50.0, 500.0], "bandpass", fs=fs, output="sos"), 0.08)
+    w = balanced(scipy.signal.butter(8, 1000.0, fs=fs, output="sos"), 0.05)
+    predicted, overall, coherence = predict(s_model, default_disturbance(fs, p_model), latency, q, w)
+    return Controller(fs, s_model, w, q, latency, band_centres(), predicted, {}, coherence, overall)

@@ -31,11 +31,11 @@ def register(commands) -> None:
 def control_section(path: str, model, dpi: float) -> tuple[str, str, str]:
     """("control", heading, HTML) for --controller: the controller's predictions on its internal model
     against the closed loop run sample by sample on this report's model (for an FB model: Q on it;
-    for an FF model: W and Q with it as the reference path and the internal model as S), and the
-    predictions of a design on each of the two models (anc.refinement)."""
+    for an FF model: W and Q with it as the reference path and the internal model as S), beside the limits
+    the controller records. Nothing is designed here: a design takes minutes, and the section shows the
+    controller as it was designed."""
     from anc import Controller
     from anc.closed_loop import predicted_and_achieved
-    from anc.refinement import attenuation_along
     from report.control_figures import control_section as section_html
 
     controller = Controller.load(path)
@@ -45,15 +45,11 @@ def control_section(path: str, model, dpi: float) -> tuple[str, str, str]:
     s_true, p_true = (model, None) if model.path == "fb" else (controller.internal_model, model)
     predicted, achieved = predicted_and_achieved(controller, s_true, p_true)
     controller.predicted_attenuation_db.update(predicted)
-    steps = None
-    if model.path == "fb" and model.to_dict() != controller.internal_model.to_dict():
-        steps = attenuation_along([controller.internal_model, model],
-                                  labels=["the controller's model", "this report's model"])
     note = ("Predicted: on the controller's internal model with the default wind-and-engine spectrum"
             + (" and this FF model as the reference path" if p_true is not None else " (no reference: feedback only)")
             + "; achieved: the same controller run sample by sample (float64, its latency) on "
             + ("this report's FB model." if p_true is None else "its internal FB model with this report's FF model."))
-    return "control", "6. Control", section_html(controller, achieved, steps, dpi, note)
+    return "control", "6. Control", section_html(controller, achieved, None, dpi, note)
 
 
 def run(args) -> int:

@@ -26,6 +26,8 @@ def delay_history():
     return session, [model, refined]
 
 
+# A design takes minutes on a shared 2-core machine (anc.feedback's program): both checks that design are slow.
+@pytest.mark.slow
 def test_each_step_predicts_and_the_truth_agrees(delay_history):
     """The model that misses 23 samples of delay (about 600x its noise floor) states a wide band: the
     design on it is conservative and stable on the truth; after the delay step the band narrows, the
@@ -46,6 +48,7 @@ def test_each_step_predicts_and_the_truth_agrees(delay_history):
     assert table.count("<tr>") == 3 and "1. + delay" in table
 
 
+@pytest.mark.slow
 def test_refused_model_is_recorded_not_raised():
     from sysid.core.model import Model
     from sysid.core.plants import appendix_a_model

@@ -3,8 +3,8 @@ timing and latency, the closed loop on a simulated true plant (host C and the em
 Cortex-M4 against the Python twin and the float64 design), the limiter, worst-case inputs,
 and strict builds.
 
-The controller is designed by ``anc.design`` on the seed (Appendix A) plants for a latency of
-2 samples, the per-sample path's (capture, compute, play). Cross compiler and emulator tests
+The controller is a board-sized one on the seed (Appendix A) plants (``control_cases.board_controller``;
+a design takes minutes) for a latency of 2 samples, the per-sample path's (capture, compute, play). Cross compiler and emulator tests
 skip with the reason when ``arm-none-eabi-gcc`` or ``qemu-system-arm`` is missing.
 """
 
@@ -17,10 +17,10 @@ from pathlib import Path
 import cffi
 import numpy as np
 import pytest
+from control_cases import board_controller
 from conftest_codegen import have
 from repo import REPO
 
-from anc import DesignOptions, design
 from anc.closed_loop import measured_attenuation, run_closed_loop
 from anc.controller import Controller
 from anc.disturbance import default_disturbance, synthesize
@@ -60,7 +60,7 @@ def setup(tmp_path_factory):
     the true plants and 1 s of disturbance."""
     root = tmp_path_factory.mktemp("control")
     s_true, p_true = appendix_a_model("fb"), appendix_a_model("ff")
-    controller = design(s_true, p_true, options=DesignOptions(latency=2))
+    controller = board_controller(s_true, p_true, 2)
     generate_controller_firmware(controller, root / "ctl2")
     generate_controller_firmware(_with_latency(controller, 8), root / "ctl8")
     x, u = synthesize(default_disturbance(controller.fs, p_true), int(SECONDS * controller.fs), controller.fs, 0)
@@ -374,7 +374,7 @@ def test_converter_latency_inside_the_identified_path(tmp_path):
     s_true = appendix_a_model("fb")
     s_true.delay = 3
     p_true = appendix_a_model("ff")
-    controller = design(s_true, p_true, options=DesignOptions(latency=2))
+    controller = board_controller(s_true, p_true, 2)
     generate_controller_firmware(controller, tmp_path / "ctl2")
     fs = controller.fs
     x, u = synthesize(default_disturbance(fs, p_true), int(SECONDS * fs), fs, 1)

@@ -1,0 +1,92 @@
+"""The whole design (``anc.design``) on identified models, the noise given as a recording, judged on the TRUE plants.
+
+Issue 26's checks, per pair of ``control_cases``: stable on the true FB path; "both" within 3 dB of the
+causal feed-forward bound of the identified models (or >= 25 dB where the bound is higher); feedback at
+least the robust bound - 1.5 dB; achieved within 2 dB of predicted in every band 50 Hz-1 kHz; no band
+louder than the stated amplification limit. The bounds are the ones the controller records
+(``Controller.limits``), so the check is against the limit the paths allow, never against the same
+design made on the true plants.
+
+A design takes minutes on a shared 2-core machine (the feed-forward fit and the feedback program), so
+every pair is marked slow; the seed pair and random pairs 3 and 11 are the representative handful that
+belong in the default run once a design takes seconds (``REPRESENTATIVE``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+from control_cases import JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pair, recording_with_anc_off, seed_pair
+
+from anc import design
+from anc.closed_loop import closed_loop_poles
+from anc.disturbance import from_recording
+
+BOTH_SHORTFALL_DB = 3.0
+ENOUGH_DB = 25.0
+FEEDBACK_SHORTFALL_DB = 1.5
+PREDICTION_DB = 2.0
+REPRESENTATIVE = ["seed", "random 3", "random 11"]
+OTHERS = [f"random {seed}" for seed in RANDOM_FB_SEEDS if f"random {seed}" not in REPRESENTATIVE]
+NAMES = [pytest.param(name, marks=pytest.mark.slow) for name in REPRESENTATIVE + OTHERS]
+
+
+def _pair(name: str):
+    return seed_pair() if name == "seed" else random_pair(int(name.split()[1]))
+
+
+@lru_cache(maxsize=None)
+def case(name: str):
+    """(controller, judgement) of the pair ``name``: designed on its identified models with its recording."""
+    pair = _pair(name)
+    s_model, p_model = identified(name)
+    disturbance = from_recording(recording_with_anc_off(pair.p), s_model.fs, ff_model=p_model)
+    controller = design(s_model, p_model, disturbance)
+    return controller, judge(controller, pair)
+
+
+def _mean(values) -> float:
+    chosen = [v for v, j in zip(values, JUDGED) if j and v is not None]
+    return float(np.mean(chosen))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_stable_on_the_true_plants(name):
+    controller, _ = case(name)
+    poles = closed_loop_poles(controller, _pair(name).s)
+    assert np.max(np.abs(poles), initial=0.0) < 1.0
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_both_reaches_the_causal_feedforward_bound(name):
+    controller, judged = case(name)
+    bound = _mean(controller.limits["causal_ff_db"])
+    assert judged.mean("both") >= min(bound - BOTH_SHORTFALL_DB, ENOUGH_DB), \
+        f"{name}: both {judged.mean('both'):.1f} dB against the causal bound {bound:.1f} dB"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_feedback_reaches_the_robust_bound(name):
+    controller, judged = case(name)
+    bound = _mean(controller.limits["feedback_db"])
+    assert judged.mean("fb") >= bound - FEEDBACK_SHORTFALL_DB, \
+        f"{name}: feedback {judged.mean('fb'):.1f} dB against the robust bound {bound:.1f} dB"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_achieved_as_predicted_in_every_band(name):
+    controller, judged = case(name)
+    for part, achieved in judged.per_band.items():
+        predicted = np.array(controller.predicted_attenuation_db[part])
+        worst = np.max(np.abs(achieved - predicted)[JUDGED])
+        assert worst <= PREDICTION_DB, f"{name} {part}: {np.round((achieved - predicted)[JUDGED], 1)}"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_no_band_louder_than_the_stated_limit(name):
+    controller, judged = case(name)
+    limit = controller.provenance["options"]["max_amplification_db"]
+    for part, achieved in judged.per_band.items():
+        assert np.min(achieved[JUDGED]) >= -limit, f"{name} {part}: {np.round(achieved[JUDGED], 1)}"

@@ -1,0 +1,92 @@
+"""Tests of the feed-forward design (anc.feedforward): closed loop on the TRUE plants against the causal bound.
+
+Each case is designed the way a user designs: on models identified from short sessions, for the road noise
+recorded with ANC off (``control_cases.recording_with_anc_off``) at the board's latency; it is judged on
+the true plants against a fresh realisation of the noise and against the causal bound computed on the
+true plants (``anc.limits.feedforward_limits``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from anc.controller import Controller
+from anc.disturbance import from_recording
+from anc.feedforward import BAND_TOLERANCE_DB, FeedforwardDesign, design_feedforward
+from anc.limits import Limits, feedforward_limits
+from anc.prediction import band_centres
+from anc.uncertainty import model_uncertainty
+
+from control_cases import JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pair, recording_with_anc_off, seed_pair
+
+LATENCY = 2
+# Where the causal bound is higher than this, this much is enough (dB).
+ENOUGH_DB = 25.0
+# Judged within this of the bound (mean 50 Hz-1 kHz) and of the prediction (every band 50 Hz-1 kHz), dB.
+BOUND_SHORTFALL_DB = 2.0
+PREDICTION_DB = 2.0
+# The judge's spread per band between two realisations of the noise (4 s, third-octave bands), dB.
+MEASUREMENT_DB = 0.5
+
+
+@dataclass(frozen=True)
+class Case:
+    design: FeedforwardDesign
+    bound: Limits
+    judged: np.ndarray
+
+
+@lru_cache(maxsize=None)
+def case(name: str) -> Case:
+    pair = seed_pair() if name == "seed" else random_pair(int(name.split()[1]))
+    s_model, p_model = identified(name)
+    bound = feedforward_limits(pair.s, from_recording(recording_with_anc_off(pair.p), ff_model=pair.p), LATENCY)
+    disturbance = from_recording(recording_with_anc_off(pair.p), ff_model=p_model)
+    design = design_feedforward(s_model, disturbance, LATENCY, model_uncertainty(s_model))
+    predicted = [float(v) for v in design.attenuation_db]
+    controller = Controller(s_model.fs, s_model, design.filter, None, LATENCY, band_centres(),
+                            {"ff": predicted, "fb": [0.0] * len(predicted), "both": predicted})
+    return Case(design, bound, judge(controller, pair).per_band["ff"])
+
+
+# One design takes minutes (a fit of about 330 Kautz functions and its balanced truncation; the seed 432 s under
+# load): every pair marked slow until a design takes seconds.
+DEFAULT = [pytest.param("seed", marks=pytest.mark.slow)]
+SLOW = [f"random {seed}" for seed in RANDOM_FB_SEEDS]
+NAMES = DEFAULT + [pytest.param(name, marks=pytest.mark.slow) for name in SLOW]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_reaches_the_causal_bound_on_the_true_plants(name):
+    c = case(name)
+    bound = c.bound.mean("causal_ff")
+    judged = float(np.mean(c.judged[JUDGED]))
+    assert judged >= min(bound - BOUND_SHORTFALL_DB, ENOUGH_DB), \
+        f"{name}: {judged:.1f} dB judged against the causal bound {bound:.1f} dB"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_judged_as_predicted_in_every_band(name):
+    c = case(name)
+    difference = np.abs(c.judged - c.design.attenuation_db)[JUDGED]
+    assert np.max(difference) <= PREDICTION_DB, f"{name}: {np.round(c.judged - c.design.attenuation_db, 1)}"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_no_band_with_noise_is_made_louder(name):
+    c = case(name)
+    louder = -c.judged[c.design.audible]
+    assert np.max(louder) <= BAND_TOLERANCE_DB + MEASUREMENT_DB, f"{name}: {np.round(c.judged, 1)}"
+
+
+@pytest.mark.slow
+def test_the_stored_filter_is_a_stable_reduction_of_the_fit():
+    d = case("seed").design
+    assert 0 < d.order <= d.full_order
+    assert d.filter.A.shape == (d.order, d.order)
+    assert np.max(np.abs(np.linalg.eigvals(d.filter.A))) < 1.0
+    assert any("balanced truncation to order" in note for note in d.notes)
