@@ -35,8 +35,8 @@ from sysid.core.structures import series
 from .basis import state_responses
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
-from .feedback_bound import (JUDGED_HZ, LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackProblem,
-                             amplification_limit,
+from .feedback_bound import (JUDGED_HZ, LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackFamily,
+                             FeedbackProblem, amplification_limit,
                              dense_grid, design_grid, feedback_bound, feedback_problem)
 from .prediction import BANDS, band_attenuation, band_grid
 from .uncertainty import Uncertainty
@@ -209,6 +209,49 @@ def _reduced(problem: FeedbackProblem, coefficients: np.ndarray, limit_dense: np
                "cap_cost_db": float(-np.mean(change[judged])) if capped else 0.0}
 
 
+def _designed_at_cap(problem: FeedbackProblem, s_model: Model, disturbance: Disturbance, latency: int,
+                     uncertainty: Uncertainty, max_amplification_db, max_order: int, limit_dense: np.ndarray,
+                     full_coefficients: np.ndarray) -> tuple[StateSpaceFilter, dict] | None:
+    """Q designed by the same program in a basis small enough that Q with S_o^-1 and its DC block has at most
+    ``max_order`` states (None when the outer factor alone fills the cap), scaled like a truncation if its
+    stored filter breaks a bound between the program's points; the reduction record of ``_reduced``."""
+    family = problem.family
+    outer_states = family.outer.inverse_statespace()[0].shape[0]
+    size = int(max_order) - 2 - outer_states
+    if size < 1:
+        return None
+    small = FeedbackFamily.of(s_model, size=size)
+    base = feedback_problem(s_model, disturbance, latency, uncertainty, max_amplification_db,
+                            problem.robustness_bound, small)
+    tight = FeedbackProblem(**{**base.__dict__, "limit": base.limit * 10.0 ** (-DESIGN_MARGIN_DB / 20.0),
+                               "robustness_bound": DESIGN_ROBUSTNESS * base.robustness_bound})
+    c = tight.solve()
+    fs = family.outer.fs
+    f_obj = problem.objective_hz.reshape(-1)
+    loop = base.dense_g * (base.dense_q @ c)
+    radius = DENSE_MARGIN * problem.robustness_bound / np.maximum(base.relative_95, 1e-300)
+    lo, hi = 0.0, 1.0
+    if np.all(np.abs(1.0 + loop) <= limit_dense) and np.all(np.abs(loop) <= radius):
+        lo = 1.0
+    else:
+        for _ in range(30):
+            t = (lo + hi) / 2.0
+            keeps = np.all(np.abs(1.0 + t * loop) <= limit_dense) and np.all(np.abs(t * loop) <= radius)
+            lo, hi = (t, hi) if keeps else (lo, t)
+    whole = minimal_balanced_realisation(*small.statespace(lo * c))
+    q = StateSpaceFilter(whole.A, whole.B, whole.C, np.array([[whole.D]]))
+    if q.order > max_order or (q.order and np.max(np.abs(np.linalg.eigvals(q.A))) >= 1.0):
+        return None
+    full = problem.objective_g * (problem.objective_q @ full_coefficients)
+    reference = -10.0 * np.log10(problem.band_ratios(full))
+    change = -10.0 * np.log10(problem.band_ratios(problem.objective_g * q.frequency_response(f_obj, fs))) - reference
+    judged = (problem.bands_hz >= JUDGED_HZ[0]) & (problem.bands_hz <= JUDGED_HZ[1])
+    return q, {"order": q.order, "full_order": None,
+               "max_band_change_db": float(np.max(np.abs(change))), "tolerance_db": REDUCTION_TOLERANCE_DB,
+               "capped": True, "scale": float(lo), "cap_cost_db": float(-np.mean(change[judged])),
+               "basis_size": size}
+
+
 def _band_peaks(frequencies_hz: np.ndarray, amplification_db: np.ndarray) -> np.ndarray:
     """The largest value of amplification_db inside each band of ``LIMIT_BANDS`` (the edge bands reaching to
     DC and to fs / 2, as their limits do)."""
@@ -271,8 +314,16 @@ def _design(s_model, disturbance, latency, uncertainty, max_amplification_db, ro
     q, reduction = _reduced(problem, coefficients, limit_dense, problem.robustness_bound, max_order)
     notes = []
     if reduction["capped"]:
-        notes.append(f"Q capped at {reduction['order']} states (max_order; full order {reduction['full_order']}), "
-                     f"scaled by {reduction['scale']:.3f} to keep the bounds: {reduction['cap_cost_db']:.2f} dB below "
+        smaller = _designed_at_cap(problem, s_model, disturbance, latency, uncertainty, max_amplification_db,
+                                   max_order, limit_dense, coefficients)
+        if smaller is not None and smaller[1]["cap_cost_db"] < reduction["cap_cost_db"]:
+            q, reduction = smaller[0], {**smaller[1], "full_order": reduction["full_order"]}
+            notes.append(f"Q at the cap: designed again in a basis of {reduction['basis_size']} functions (the "
+                         "truncated full filter lost more)")
+    if reduction["capped"]:
+        scaled = f", scaled by {reduction['scale']:.3f} to keep the bounds" if reduction["scale"] < 1.0 else ""
+        notes.append(f"Q capped at {reduction['order']} states (max_order; full order {reduction['full_order']})"
+                     f"{scaled}: {reduction['cap_cost_db']:.2f} dB below "
                      f"the full filter's mean over the judged bands {JUDGED_HZ[0]:g} Hz-{JUDGED_HZ[1] / 1000:g} kHz")
     elif reduction["order"] == reduction["full_order"]:
         notes.append(f"Q kept at its full order {reduction['order']}: no truncation kept the judged bands within "

@@ -57,6 +57,6 @@ def test_the_schur_state_responses_are_the_resolvent_and_the_state_basis_realise
     np.testing.assert_allclose(state_responses(A, B, z), direct, rtol=1e-9, atol=1e-12)
     basis = StateBasis(A, B)
     c = np.linspace(1.0, -1.0, basis.size)
-    Ab, Bb, Cb, Db = basis.statespace(c)
+    _, _, Cb, Db = basis.statespace(c)
     f = np.linspace(0.0, FS / 2.0, 33)
     np.testing.assert_allclose(basis.responses(f, FS) @ c, Cb[0] @ direct + Db[0, 0], rtol=1e-9, atol=1e-12)
