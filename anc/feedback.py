@@ -35,9 +35,8 @@ from sysid.core.structures import series
 from .basis import state_responses
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
-from .feedback_bound import (JUDGED_HZ, LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackFamily,
-                             FeedbackProblem, amplification_limit,
-                             dense_grid, design_grid, feedback_bound, feedback_problem)
+from .feedback_bound import (JUDGED_HZ, LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackFamily, FeedbackProblem,
+                             amplification_limit, dense_grid, design_grid, feedback_bound, feedback_problem)
 from .prediction import BANDS, band_attenuation, band_grid
 from .uncertainty import Uncertainty
 
