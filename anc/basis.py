@@ -47,7 +47,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-__all__ = ["LaguerreBasis", "KautzBasis", "fit", "fit_blocks", "qr_blocks"]
+__all__ = ["LaguerreBasis", "KautzBasis", "StateBasis", "state_responses", "fit", "fit_blocks", "qr_blocks"]
 
 
 @dataclass(frozen=True)
@@ -289,6 +289,47 @@ class KautzBasis:
             gain = Dk[0, 0] * gain
             at += poles.size
         return A, B, c[1:].reshape(1, -1), c[:1].reshape(1, 1)
+
+
+def state_responses(A: np.ndarray, B: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(n, len(z)) complex: (zI - A)^-1 B at many points z, by the complex Schur form A = U R U^H and back
+    substitution over all points at once, O(n^2) per point (the modal form is unreliable for the repeated
+    poles at the origin of a delay; a dense solve per point is O(n^3))."""
+    n = A.shape[0]
+    z = np.asarray(z, dtype=complex).reshape(-1)
+    if n == 0:
+        return np.zeros((0, z.size), dtype=complex)
+    R, U = scipy.linalg.schur(A, output="complex")
+    b = U.conj().T @ np.asarray(B, dtype=float)[:, 0]
+    x = np.zeros((n, z.size), dtype=complex)
+    for i in range(n - 1, -1, -1):
+        x[i] = (b[i] + R[i, i + 1:] @ x[i + 1:]) / (z - R[i, i])
+    return U @ x
+
+
+@dataclass(frozen=True)
+class StateBasis:
+    """The constant and the states of a stable (A, B) as a basis, W = D + C x: a truncated filter's poles with
+    its output weights free (``anc.feedforward`` refits them when the board's order cap is reached)."""
+
+    A: np.ndarray
+    B: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return self.A.shape[0] + 1
+
+    def responses(self, frequencies_hz, fs: float) -> np.ndarray:
+        """Complex responses (len(f), size) of [1, x_1, ..., x_n] at frequencies in Hz."""
+        z = np.exp(2j * np.pi * np.asarray(frequencies_hz, dtype=float).reshape(-1) / fs)
+        return np.hstack([np.ones((z.size, 1), dtype=complex), state_responses(self.A, self.B, z).T])
+
+    def statespace(self, coefficients) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(A, B, C, D) of c_0 + sum c_i x_i."""
+        c = np.asarray(coefficients, dtype=float).reshape(-1)
+        if c.size != self.size:
+            raise ValueError(f"expected {self.size} coefficients; found {c.size}")
+        return self.A, self.B, c[1:].reshape(1, -1), c[:1].reshape(1, 1)
 
 
 def qr_blocks(rows, size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -2,9 +2,9 @@
 
 Designed on models identified from short sessions, the noise given as a recording with ANC off
 (``control_cases.recording_with_anc_off``), judged on the true plants against a fresh noise
-realisation (``control_cases.judge``). The closed-loop checks are slow (identification, the bound with
-its four relaxations and the truncation search took over 13 CPU-minutes for the seed pair on a shared
-2-core machine); the default run checks the bound's pieces.
+realisation (``control_cases.judge``). The closed-loop checks are slow (identification, the bound with its
+four relaxations, the design and the judge: the design alone 8 CPU-s for the seed pair); the default run checks
+the bound's pieces, the seed's bound on its true path and a capped design.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from anc.controller import Controller
 from anc.disc_program import DiscProgram, solve_disc_program
 from anc.disturbance import from_recording
 from anc.feedback import design_feedback
-from anc.feedback_bound import LIMIT_BANDS, amplification_limit
+from anc.feedback_bound import LIMIT_BANDS, amplification_limit, feedback_bound
 from anc.outer_factor import outer_factor
 from anc.prediction import band_centres
 from anc.rational_basis import RationalBasis, basis_poles
-from anc.uncertainty import model_uncertainty
+from anc.uncertainty import Uncertainty, model_uncertainty
 from sysid.core.plants import appendix_a_model
 from sysid.core.response import frequency_response
 
@@ -123,3 +123,31 @@ def test_seed_pair_reaches_the_bound_within_1_5_db():
 @pytest.mark.parametrize("fb_seed", RANDOM_FB_SEEDS)
 def test_random_paths_reach_the_bound_within_1_5_db(fb_seed):
     _check_closed_loop(random_pair(fb_seed), f"random {fb_seed}")
+
+
+def _five_percent(fs: float) -> Uncertainty:
+    """Issue 26's stated robustness: a 5 % relative error at every frequency."""
+    return Uncertainty(np.array([1e-3, fs / 2.0]), np.array([0.05, 0.05]), (0.0, fs / 2.0), "5 % everywhere")
+
+
+def test_the_seed_bound_on_the_true_path_is_the_issues_reference():
+    # Issue 26: 5.7 dB for the seed's FB path at latency 1, 5 % uncertainty and a 6 dB peak (its own convex
+    # design); this program found 6.0 dB. The noise differs in realisation, so within 1 dB.
+    pair = seed_pair()
+    disturbance = from_recording(recording_with_anc_off(pair.p), pair.s.fs)
+    bound = feedback_bound(pair.s, disturbance, LATENCY, _five_percent(pair.s.fs), explain=False)
+    assert abs(bound.mean_db - 5.7) <= 1.0, f"{bound.mean_db:.2f} dB"
+
+
+def test_a_capped_feedback_filter_keeps_the_cap_and_the_stated_bounds():
+    pair = seed_pair()
+    disturbance = from_recording(recording_with_anc_off(pair.p), pair.s.fs)
+    cap = 40
+    design = design_feedback(pair.s, disturbance, LATENCY, _five_percent(pair.s.fs), explain=False, max_order=cap)
+    assert design.filter.order <= cap
+    assert np.max(np.abs(np.linalg.eigvals(design.filter.A))) < 1.0
+    assert np.all(design.amplification_db <= design.amplification_limit_db + 1e-6)
+    assert design.reduction["capped"] and design.reduction["cap_cost_db"] >= 0.0
+    assert any("capped at" in note and "dB below the full filter" in note for note in design.notes)
+    with pytest.raises(ValueError, match="max_order"):
+        design_feedback(pair.s, disturbance, LATENCY, _five_percent(pair.s.fs), max_order=2)
