@@ -69,7 +69,8 @@ class DesignOptions:
     """Design choices. ``latency`` in samples from measurement to drive (>= 1; default the board's control
     path, ``BOARD_LATENCY_SAMPLES``); ``max_amplification_db``: Q's amplification limit per band (dB);
     ``max_ff_gain_db``: W's gain bound outside the bands (dB); ``max_order``: the largest order of each
-    filter the board affords (None: the order the design needs)."""
+    filter (None: the order the design needs, cut to what the board affords when ``fit_board``: see
+    ``board_orders``)."""
 
     latency: int = BOARD_LATENCY_SAMPLES
     max_amplification_db: float = 6.0
@@ -77,6 +78,7 @@ class DesignOptions:
     feedback: bool = True
     feedforward: bool = True
     max_order: int | None = None
+    fit_board: bool = True
 
 
 def undamped_pole(model: Model) -> tuple[float, float] | None:
@@ -153,6 +155,22 @@ def band_limits(bands_hz, ff_limits, fb_bound) -> dict:
     return limits
 
 
+def board_orders(s_order: int, q_order: int, w_order: int) -> tuple[int, int]:
+    """The orders (Q, W) the board affords beside the internal model S: those given when the control path fits
+    in ``BOARD_CYCLES_PER_SAMPLE``, else the sections left after S's shared 2 : 3 between Q and W (Q's
+    truncation costs less per state: seed pair, Q at 60 states 0.8 dB below its 118, W at 120 states 1.4 dB
+    below its 273), each no more than it needs; Q at least 4 states (its double zero at DC and a mode)."""
+    if board_cost(s_order, q_order, w_order) <= BOARD_CYCLES_PER_SAMPLE:
+        return q_order, w_order
+    sections = (BOARD_CYCLES_PER_SAMPLE - PATH_INSTRUCTIONS) // INSTRUCTIONS_PER_SECTION - (s_order + 1) // 2
+    if w_order == 0:
+        return min(q_order, 2 * max(sections, 2)), 0
+    if q_order == 0:
+        return 0, min(w_order, 2 * max(sections, 1))
+    q = min(q_order, max(4, 2 * (2 * sections // 5)))
+    return q, min(w_order, max(2, 2 * (sections - (q + 1) // 2)))
+
+
 def board_cost(*orders: int) -> int:
     """Estimated instructions per sample of the board's control path running filters of these orders (the
     internal model S, Q, W): second-order sections of each at ``INSTRUCTIONS_PER_SECTION`` plus the path's own."""
@@ -221,6 +239,12 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         t0 = time.process_time()
         fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
                                     options.max_amplification_db, **order_budget)
+        if options.max_order is None and options.fit_board:
+            # Q alone on the board first; W, designed around Q's loop, is fitted to what Q leaves below.
+            q_fits, _ = board_orders(fb_model.order, fb_design.filter.order, 0)
+            if q_fits < fb_design.filter.order:
+                fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
+                                            options.max_amplification_db, max_order=q_fits)
         timing["feedback"] = time.process_time() - t0
         fb, fb_bound = fb_design.filter, fb_design.bound
         margins = _margins(fb_design.margins, fb_design.loop)
@@ -240,6 +264,21 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         t0 = time.process_time()
         ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty, feedback_loop=loop_fn,
                                        ff_model=ff_model, max_gain_db=options.max_ff_gain_db, **order_budget)
+        if options.max_order is None and options.fit_board:
+            q_order = 0 if fb is None else fb.order
+            q_fits, w_fits = board_orders(fb_model.order, q_order, ff_design.filter.order)
+            if q_fits < q_order:
+                # Both do not fit: Q gets its share, W the rest, each designed again at its cap.
+                fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
+                                            options.max_amplification_db, max_order=max(q_fits, 3))
+                fb, fb_bound = fb_design.filter, fb_design.bound
+                margins = _margins(fb_design.margins, fb_design.loop)
+                truncation["fb"] = dict(fb_design.reduction)
+                notes += [n for n in fb_design.notes if n not in notes]
+            if w_fits < ff_design.filter.order or q_fits < q_order:
+                ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty,
+                                               feedback_loop=loop_fn, ff_model=ff_model,
+                                               max_gain_db=options.max_ff_gain_db, max_order=w_fits)
         timing["feedforward"] = time.process_time() - t0
         ff = ff_design.filter
         truncation["ff"] = {"order": int(ff_design.order), "full_order": int(ff_design.full_order),

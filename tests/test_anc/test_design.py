@@ -187,3 +187,15 @@ def test_the_board_cost_counts_sections():
 
     assert abs(board_cost(7, 22, 22) - 620) <= 0.05 * 620
     assert board_cost(7, 300, 300) > BOARD_CYCLES_PER_SAMPLE
+
+
+def test_board_orders_fit_the_board_and_cut_only_what_does_not_fit():
+    from anc.design import BOARD_CYCLES_PER_SAMPLE, board_cost, board_orders
+
+    assert board_orders(7, 20, 30) == (20, 30)  # fits: nothing cut
+    for s_order, q_order, w_order in [(7, 106, 322), (7, 157, 273), (24, 118, 0), (5, 0, 315), (300, 118, 273)]:
+        q, w = board_orders(s_order, q_order, w_order)
+        assert q <= q_order and w <= w_order
+        assert (q == 0) == (q_order == 0) and (w == 0) == (w_order == 0)
+        if s_order < 100:
+            assert board_cost(s_order, q, w) <= BOARD_CYCLES_PER_SAMPLE
