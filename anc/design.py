@@ -221,8 +221,9 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     if not (isinstance(options.latency, (int, np.integer)) and not isinstance(options.latency, bool)
             and options.latency >= 1):
         raise HelmetAncError(f"latency must be a whole number of samples >= 1; found {options.latency!r}")
-    if options.max_order is not None and not (isinstance(options.max_order, int) and options.max_order >= 1):
-        raise HelmetAncError(f"max_order must be a whole number >= 1 or None; found {options.max_order!r}")
+    if options.max_order is not None and not (isinstance(options.max_order, int) and options.max_order >= 3):
+        raise HelmetAncError(f"max_order must be a whole number of states >= 3 (Q holds a double zero at DC and "
+                             f"a mode) or None; found {options.max_order!r}")
     if ff_model is not None:
         model_uncertainty(ff_model)  # refuses an FF model whose error is unknown, as for the FB model
     disturbance = disturbance or default_disturbance(fb_model.fs, ff_model)
@@ -235,6 +236,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     margins: dict = {}
     loop_fn = None
     fb_bound = None
+    fb_notes: list[str] = []  # the notes of the Q that is kept (it may be designed again at the board's cap)
     if options.feedback:
         t0 = time.process_time()
         fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
@@ -249,7 +251,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         fb, fb_bound = fb_design.filter, fb_design.bound
         margins = _margins(fb_design.margins, fb_design.loop)
         truncation["fb"] = dict(fb_design.reduction)
-        notes += fb_design.notes
+        fb_notes = list(fb_design.notes)
 
         def loop_fn(frequencies):
             Gf = fb_model.frequency_response(frequencies) * np.exp(-2j * np.pi * frequencies * options.latency / fb_model.fs)
@@ -274,7 +276,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
                 fb, fb_bound = fb_design.filter, fb_design.bound
                 margins = _margins(fb_design.margins, fb_design.loop)
                 truncation["fb"] = dict(fb_design.reduction)
-                notes += [n for n in fb_design.notes if n not in notes]
+                fb_notes = list(fb_design.notes)
             if w_fits < ff_design.filter.order or q_fits < q_order:
                 ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty,
                                                feedback_loop=loop_fn, ff_model=ff_model,
@@ -286,6 +288,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         notes += ff_design.notes
     elif options.feedforward:
         notes.append("no feed-forward filter: no FF model and no chin-microphone spectrum")
+    notes = fb_notes + notes
     cost = board_cost(fb_model.order, *(f.order for f in (fb, ff) if f is not None))
     fits = cost <= BOARD_CYCLES_PER_SAMPLE
     notes.append(f"board: the control path (S order {fb_model.order}, Q order {0 if fb is None else fb.order}, W order "

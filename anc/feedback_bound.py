@@ -351,7 +351,7 @@ def limit_texts(bound: FeedbackBound, problem: FeedbackProblem, uncertainty: Unc
                              f"|1 + G Q| reaches its {limit_db:g} dB limit; +{gain:.1f} dB with 6 dB more)")
             elif name == "uncertainty":
                 r95 = float(uncertainty.at([centre])[0])
-                named.append(f"the model's uncertainty (r95 {100 * r95:.0f} % here; r95 |G Q| <= "
+                named.append(f"the model's uncertainty (r95 {100 * r95:.2g} % here; r95 |G Q| <= "
                              f"{bound.robustness_bound:g} wherever it is large; +{gain:.1f} dB without it)")
             elif name == "nonminimum_phase":
                 hz, z = min(nmp, key=lambda item: abs(np.log(max(item[0], 1e-3) / centre)))

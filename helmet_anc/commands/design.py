@@ -18,7 +18,7 @@ from sysid.core.files import atomic_write_text, check_output_file
 from sysid.core.model import Model
 from sysid.io.recordings import load_recording
 
-from .common import add_force_option
+from .common import add_force_option, parse_max_order
 
 # Width of one part of the reason column (characters); longer causes are cut at a word (in full below the table).
 REASON_WIDTH = 40
@@ -44,6 +44,9 @@ def register(commands) -> None:
     parser.add_argument("--latency", type=_latency, default=BOARD_LATENCY_SAMPLES, metavar="L",
                         help=f"samples from measurement to drive (default {BOARD_LATENCY_SAMPLES}: the board's "
                              "control path; generate-firmware refuses less)")
+    parser.add_argument("--max-order", metavar="N",
+                        help="largest order (states) of Q and of W; default: the orders the design needs, cut to "
+                             "what the board's 1750 cycles per sample afford")
     parser.add_argument("--report", metavar="FILE.html", help="also write the control page (figures, margins)")
     parser.add_argument("-o", "--output", required=True, metavar="controller.json")
     add_force_option(parser)
@@ -164,7 +167,7 @@ def run(args) -> int:
     else:
         disturbance = default_disturbance(fb.fs, ff)
     provenance = {"fb_model": str(args.fb), "ff_model": args.ff, "disturbance_file": args.disturbance}
-    controller = design(fb, ff, disturbance, DesignOptions(latency=args.latency), provenance=provenance)
+    controller = design(fb, ff, disturbance, DesignOptions(latency=args.latency, max_order=parse_max_order(args.max_order)), provenance=provenance)
     controller.save(output)
     if report is not None:
         from report.control_figures import control_page
