@@ -19,13 +19,14 @@ from threadpoolctl import threadpool_limits
 
 from ..core import lti
 from ..core.thresholds import (EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG,
-                               MAX_EXTRA_DELAY)
+                               MAX_EXTRA_DELAY, TAIL_LADDER_SLACK)
 from ..estimation.delay import delay_centimetres, fixed_pole_scan, generic_pole_scan
 from ..estimation.output_error import BlockData, block_data, refine_output_error
 from ..io.recordings import Recording
 from ..validation.sweeps import VALIDATION_BAND, rms_from_responses, sweep_spectrum
 from . import DiagnosisContext, finding, provider, uses
 from .dynamics import arbitrate, series_factor_finding
+from .tail import estimate_ratio
 
 __all__ = ["delay_finding", "scan_delay", "generic_scan", "refit_rms"]
 
@@ -106,7 +107,7 @@ def _coarse_scan(ctx: DiagnosisContext) -> tuple[int, np.ndarray]:
     return scan_delay(ctx, coarse=True)
 
 
-@uses("delay-scan", "delay-scan-data", "delay-sweep-spectra", "sweep-bins")
+@uses("delay-scan", "delay-scan-data", "delay-sweep-spectra", "sweep-bins", "long-response")
 def delay_finding(ctx: DiagnosisContext) -> dict:
     model = ctx.model
     best, costs = ctx.value("delay-scan")
@@ -134,6 +135,15 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
             extra, refit_gain = best - model.delay, gains[best]
             significant = refit_gain >= REFIT_GAIN
             ratio = max(ratio, COST_RATIO * refit_gain / REFIT_GAIN)
+    onset = None
+    if significant and extra >= 1 and ctx.excess >= EXCESS:
+        # A pure delay is a stretch in which nothing arrives: the long least-squares FIR (free to hold any onset,
+        # any detail) then validates as well behind it as from the model's delay. When it validates worse, the data
+        # hold response there (a slow onset), and the scan's minimum only moves the error of a model too short for
+        # the response (a capped one) to where it costs less: no delay.
+        onset = (estimate_ratio(ctx, model.delay), estimate_ratio(ctx, best))
+        if onset[1] > TAIL_LADDER_SLACK * onset[0]:
+            significant = False
     microseconds = 1e6 * extra / model.fs
     # Excess phase of the missing delay at the top of the validation band (effects.md: linear in f).
     excess_phase = 360.0 * VALIDATION_BAND[1] * max(extra, 0) / model.fs
@@ -144,10 +154,20 @@ def delay_finding(ctx: DiagnosisContext) -> dict:
                        f"non-minimum-phase zeros (fixed-pole cost falls {ratio:.2f}x at delay {best})")
     else:
         explanation = "no delay beyond the model's own lowers the fit cost"
-    found = finding("delay", significant, ratio / COST_RATIO if extra >= 1 else 0.0,
+    if onset is not None and not significant:
+        explanation = (f"not significant: the response starts before it (the long least-squares estimate behind "
+                       f"{extra} more sample(s) validates at {onset[1]:.2f}x the noise floor against {onset[0]:.2f}x "
+                       f"from the model's delay): the fixed-pole cost falls {ratio:.2f}x at delay {best} only because "
+                       f"the model is too short for the response")
+    score = ratio / COST_RATIO if extra >= 1 else 0.0
+    if onset is not None and not significant:
+        # Ranked by the condition that fails: how much worse the estimate validates behind the delay.
+        score = min(score, TAIL_LADDER_SLACK * onset[0] / onset[1])
+    found = finding("delay", significant, score,
                    {"samples": extra, "total_samples": best, "microseconds": microseconds, "sound_path_cm": centimetres},
                    explanation, f"refine --add delay:{extra}" if extra >= 1 else "none",
                    {"cost_ratio": ratio, "rms_over_floor": ctx.excess, "refit_gain": refit_gain,
-                    "excess_phase_deg": excess_phase, "leads": bool(significant and excess_phase >= LEADING_PHASE_DEG)})
+                    "excess_phase_deg": excess_phase,
+                    "estimate_ratios": list(onset) if onset is not None else None, "leads": bool(significant and excess_phase >= LEADING_PHASE_DEG)})
     arbitrate(found, ctx)
     return found

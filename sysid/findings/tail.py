@@ -60,7 +60,7 @@ from ..validation.sweeps import CompressedValidation, SweepSpectrum, rms_from_re
 from . import DiagnosisContext, finding, provider, uses
 
 __all__ = ["LongResponse", "TruncationLadder", "band_envelope", "noise_rms", "length_above_noise", "long_response",
-           "tail_spectra", "truncation_ladder", "ladder_text", "tail_finding"]
+           "tail_spectra", "estimate_ratio", "truncation_ladder", "ladder_text", "tail_finding"]
 
 NO_IN_BAND_ERROR = ("dc-offset", "time-variation")
 # The envelope's low-pass: flat to the validation band's top, TAIL_STOPBAND_DB down from the identification band's.
@@ -194,6 +194,23 @@ def tail_spectra(model, sweeps: list[Recording], comparison) -> list[SweepSpectr
         spectra.append(sweep_spectrum(Recording(model.apply_input_nonlinearity(sweep.u), measured, sweep.fs,
                                                 sweep.path)))
     return spectra
+
+
+def estimate_ratio(ctx: DiagnosisContext, delay: int) -> float:
+    """Validation error (rms over the noise floor, on the sweeps' DFT bins) of the noise recording's long
+    least-squares FIR behind ``delay`` samples (the model's input map otherwise): what any model behind that
+    delay can reach. At the model's own delay it is the shared ``long-response``'s estimate."""
+    model = ctx.model
+    if delay == model.delay:
+        taps = ctx.value("long-response").taps
+    else:
+        later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D, delay=delay,
+                      input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
+        taps = long_response(later, ctx.noise, ctx.transient_s).taps
+    spectra = tail_spectra(model, ctx.sweeps, ctx.comparison)
+    responses = [np.polyval(taps[::-1], np.exp(-2j * np.pi * s.frequencies / ctx.fs))
+                 * np.exp(-2j * np.pi * s.frequencies * delay / ctx.fs) for s in spectra]
+    return rms_from_responses(spectra, responses) / ctx.comparison.noise_floor
 
 
 def _response(system, z: np.ndarray) -> np.ndarray:
@@ -397,6 +414,13 @@ def tail_finding(ctx: DiagnosisContext):
     # as no truncation counts at its order).
     held_states = max(model.order, ladder.model_states or 0)
     density = chosen / max(TAIL_STATES_RATIO * held_states, held_states + TAIL_MIN_EXTRA_STATES)
+    at_cap = cap is not None and model.order >= cap
+    if at_cap:
+        # The user's cap, not the order search, set the order: the states the data need beyond it are the
+        # cap's to grant, whatever currency the model's own are counted in, and the only alternative to
+        # the long estimate's states is under-modelled's one more mode (2 states). The tail is named when
+        # the data need more than that beyond the cap.
+        density = max(density, chosen / (model.order + 3))
     significant = gain >= EXPLAINS_GAIN and share >= FACTOR_SHARE and density >= 1.0
     # Ranked by how much better the states validate; short of significance, by the condition that fails most.
     score = gain / EXPLAINS_GAIN if significant else max(0.0, min(gain / EXPLAINS_GAIN, share / FACTOR_SHARE, density))

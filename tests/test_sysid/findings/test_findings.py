@@ -10,7 +10,7 @@ from sysid import effects
 from sysid.core.model import Model
 from sysid.diagnose import diagnose
 from sysid.effects import Effect
-from sysid.findings import PROVIDERS, DiagnosisContext, finding, uses
+from sysid.findings import PROVIDERS, DiagnosisContext, data_quality, finding, uses
 from sysid.io.lines import line_search
 from sysid.validation.compare import compare
 
@@ -25,6 +25,8 @@ def test_one_line_search_per_diagnosis_read_by_both_line_findings(monkeypatch):
     session = true_session("ff", 5, HUM)
     model = _true_model(session)
     calls, readers = [], set()
+    # The provider registers on its module's import (the registry imports it lazily, on the first diagnosis).
+    assert data_quality.clipping_finding.uses
     search = PROVIDERS["session-lines"]
     monkeypatch.setitem(PROVIDERS, "session-lines", lambda ctx: calls.append(ctx) or search(ctx))
     value = DiagnosisContext.value
