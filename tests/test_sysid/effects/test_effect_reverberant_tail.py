@@ -93,12 +93,16 @@ def identified_capped(name: str, cap: int):
     return session, identify(session.noise, session.sweeps, "fb", IdentificationOptions(max_order=cap)).model
 
 
-def test_identify_s_own_capped_long_route_model_is_named_a_tail_not_a_delay():
+# identify at the cap, diagnosis and refinement take about 10 s on FABIAN; on the HD 600 identify alone takes 37 s
+# and refinement to its 330 states minutes (a busy 2-core machine): slow.
+@pytest.mark.parametrize("name, cap, lifted", [("fabian_left_az60", 12, 30),
+                                               pytest.param("hptf_hd600_left", 60, MAX_ORDER, marks=pytest.mark.slow)])
+def test_identify_s_own_capped_long_route_model_is_named_a_tail_not_a_delay(name, cap, lifted):
     # FABIAN capped at 12 states (the data need 24-25): output error fits the capped core best a few samples
     # late, which the delay scan reads as a missing delay; the long estimate behind those samples validates
     # worse (the response starts there), so the tail is what is named.
-    session, model = identified_capped("fabian_left_az60", 12)
-    assert model.order == 12 and model.identification["max_order"] == 12
+    session, model = identified_capped(name, cap)
+    assert model.order <= cap and model.identification["max_order"] == cap
     findings = diagnose(model, session.noise, session.sweeps)
     text = format_findings(findings)
     assert [f["effect"] for f in findings.significant] == ["reverberant-tail"], text
@@ -114,10 +118,10 @@ def test_identify_s_own_capped_long_route_model_is_named_a_tail_not_a_delay():
     assert top["params"]["length_ms"] == pytest.approx(1e3 * truth, rel=0.25), text
     needed = states_the_taps_need(session, comparison)
     assert needed / 2 <= top["params"]["states"] <= 2 * needed, (needed, text)
-    auto = refine_auto(model, session.noise, session.sweeps, max_order=30)
+    auto = refine_auto(model, session.noise, session.sweeps, max_order=lifted)
     more = format_refinement(auto.steps, auto.stop_reason)
     assert auto.steps[0].effect == "reverberant-tail" and auto.steps[0].accepted, more
-    assert auto.after.ratio <= AT_FLOOR and auto.model.order <= 30, more
+    assert auto.after.ratio <= AT_FLOOR and auto.model.order <= lifted, more
 
 
 def test_the_hd600_explanation_reads_as_the_user_needs_it():
