@@ -37,9 +37,11 @@ _DUAL_ITERATIONS = 500
 _MM_ROUNDS = 8
 _MM_SETTLED_DB = 0.1
 # Kautz poles: the slowest corner (Hz) any pole may have (a near-DC zero of S makes W integrate down to
-# there), the log-spaced set's range (Hz; the top as a fraction of fs) and density, and its dampings.
-_SLOWEST_HZ = 0.1
-_GENERIC_HZ = (0.1, 0.45)
+# there; below the 20 Hz band there is nothing to control, and corners at 0.1 Hz put W's poles within
+# 2e-6 of z = 1, which no fixed- or floating-point section of the board holds), the log-spaced set's range
+# (Hz; the top as a fraction of fs) and density, and its dampings.
+_SLOWEST_HZ = 15.0
+_GENERIC_HZ = (15.0, 0.45)
 _PER_DECADE = 8
 _DAMPINGS = (0.05, 0.15, 0.5)
 # Poles at the origin beyond W's own delay: an FIR part for the fastest detail.
