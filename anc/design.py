@@ -31,6 +31,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from sysid.core import board
 from sysid.core.errors import HelmetAncError
 from sysid.core.model import Model
 
@@ -55,13 +56,14 @@ UNDAMPED_MARGIN = 1e-6
 # weakness when neither coherence, a zero of S nor the chin path's lead explains its bound; nearer its
 # peak nothing named explains it and nothing is said.
 WEAK_DRIVE_DB = 20.0
-# The board's budget for the control path: half of a 168 MHz Cortex-M4 at 48 kHz (cycles per sample), and
-# the emulated M4's measured cost (BENCHMARKS.md "Board control loop", Q15, QEMU trace of the real ELF,
-# 2026-11-23): 21 instructions per second-order section per sample and 66 for the path's own work
-# (d_hat, delays, limiter). Instructions are not cycles (loads take 2), so the estimate is a lower bound.
-BOARD_CYCLES_PER_SAMPLE = 1750
-INSTRUCTIONS_PER_SECTION = 21
-PATH_INSTRUCTIONS = 66
+# The board's budget for the control path: half of a 168 MHz Cortex-M4 at 48 kHz (cycles per sample), and its
+# cost from the emulated M4's measured figures (``sysid.core.board``: one Q15 step call per filter and sample, per
+# section and per call) plus the path's own work (d_hat, delays, limiter): BENCHMARKS.md "Board control loop"
+# measured 620 instructions a sample for S/Q/W of orders 7/22/22, whose three filter steps count 560. Instructions
+# are not cycles (loads take 2), so the estimate is a lower bound.
+BOARD_CYCLES_PER_SAMPLE = int(board.BOARD_CYCLES_PER_SAMPLE // 2)
+INSTRUCTIONS_PER_SECTION = board.Q15_STEP_PER_SECTION
+PATH_INSTRUCTIONS = 60
 
 
 @dataclass(frozen=True)
@@ -162,7 +164,9 @@ def board_orders(s_order: int, q_order: int, w_order: int) -> tuple[int, int]:
     below its 273), each no more than it needs; Q at least 4 states (its double zero at DC and a mode)."""
     if board_cost(s_order, q_order, w_order) <= BOARD_CYCLES_PER_SAMPLE:
         return q_order, w_order
-    sections = (BOARD_CYCLES_PER_SAMPLE - PATH_INSTRUCTIONS) // INSTRUCTIONS_PER_SECTION - (s_order + 1) // 2
+    calls = 1 + (q_order > 0) + (w_order > 0)
+    sections = int((BOARD_CYCLES_PER_SAMPLE - PATH_INSTRUCTIONS - calls * board.Q15_STEP_PER_CALL)
+                   // INSTRUCTIONS_PER_SECTION) - board.sections(s_order)
     if w_order == 0:
         return min(q_order, 2 * max(sections, 2)), 0
     if q_order == 0:
@@ -173,8 +177,9 @@ def board_orders(s_order: int, q_order: int, w_order: int) -> tuple[int, int]:
 
 def board_cost(*orders: int) -> int:
     """Estimated instructions per sample of the board's control path running filters of these orders (the
-    internal model S, Q, W): second-order sections of each at ``INSTRUCTIONS_PER_SECTION`` plus the path's own."""
-    return PATH_INSTRUCTIONS + INSTRUCTIONS_PER_SECTION * sum((int(n) + 1) // 2 for n in orders)
+    internal model S, Q, W): each filter's one-sample Q15 step (``sysid.core.board.board_cost``) plus the
+    path's own ``PATH_INSTRUCTIONS``."""
+    return int(round(PATH_INSTRUCTIONS + sum(board.board_cost(n).step for n in orders if int(n) > 0)))
 
 
 def _margins(margins: dict, loop: np.ndarray) -> dict:
