@@ -34,13 +34,15 @@ import numpy as np
 from sysid.core import board
 from sysid.core.errors import HelmetAncError
 from sysid.core.model import Model
+from sysid.estimation.input_nonlinearity import drive_limit
 
 from .controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
 from .disturbance import Disturbance, default_disturbance
 from .feedback import ROBUSTNESS_BOUND, design_feedback
 from .feedforward import BAND_TOLERANCE_DB, design_feedforward
 from .limits import feedforward_limits
-from .prediction import band_attenuation, band_centres, band_grid, coherence_bound, ear_psd, overall_dba
+from .prediction import (band_attenuation, band_centres, band_grid, coherence_bound, drive_psd, ear_psd,
+                         overall_dba)
 from .uncertainty import Uncertainty, model_uncertainty
 
 __all__ = ["DesignOptions", "design", "predict", "band_limits", "board_cost", "UNDAMPED_MARGIN", "undamped_pole",
@@ -56,6 +58,9 @@ UNDAMPED_MARGIN = 1e-6
 # weakness when neither coherence, a zero of S nor the chin path's lead explains its bound; nearer its
 # peak nothing named explains it and nothing is said.
 WEAK_DRIVE_DB = 20.0
+# Peak over rms of the drive, a Gaussian noise: exceeded by 6e-5 of its samples.
+DRIVE_CREST_FACTOR = 4.0
+
 # The board's budget for the control path: half of a 168 MHz Cortex-M4 at 48 kHz (cycles per sample), and its
 # cost from the emulated M4's measured figures (``sysid.core.board``: one Q15 step call per filter and sample, per
 # section and per call) plus the path's own work (d_hat, delays, limiter): BENCHMARKS.md "Board control loop"
@@ -155,6 +160,24 @@ def band_limits(bands_hz, ff_limits, fb_bound) -> dict:
                 limits["feedback_db"][i] = float(value)
                 limits["reasons"]["fb"][i] = str(reason)
     return limits
+
+
+def drive_level(s_model: Model, disturbance: Disturbance, fb: StateSpaceFilter | None,
+                ff: StateSpaceFilter | None) -> dict:
+    """The drive the controller asks of the driver (FS): its rms from ``prediction.drive_psd`` over 20 Hz to
+    0.45 fs, its peaks at ``DRIVE_CREST_FACTOR`` times that, and the FB model's drive limit (the sine amplitude
+    at which its input nonlinearity's harmonics reach -20 dB: ``sysid.estimation.input_nonlinearity.drive_limit``;
+    None for a linear model). ``scale``: the factor on Q and W that keeps the peaks at the limit (1 within it)."""
+    fs = s_model.fs
+    frequencies = np.geomspace(20.0, 0.45 * fs, 4000)
+    spectra = disturbance.at(frequencies)
+    q = None if fb is None else fb.frequency_response(frequencies, fs)
+    w = None if ff is None or not spectra.has_reference else ff.frequency_response(frequencies, fs)
+    rms = float(np.sqrt(np.trapezoid(drive_psd(spectra, q, w), frequencies)))
+    limit = drive_limit(s_model)
+    peak = DRIVE_CREST_FACTOR * rms
+    scale = 1.0 if limit is None or peak <= limit else limit / peak
+    return {"rms_fs": rms, "peak_fs": peak, "limit_fs": limit, "scale": scale}
 
 
 def board_orders(s_order: int, q_order: int, w_order: int) -> tuple[int, int]:
@@ -301,6 +324,14 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
                  f"{BOARD_CYCLES_PER_SAMPLE} cycles (half of a 168 MHz Cortex-M4 at 48 kHz)"
                  + ("" if fits else ": it does NOT fit; design again with DesignOptions(max_order=...) for the "
                     "order that fits, at the attenuation that costs"))
+    drive = drive_level(fb_model, disturbance, fb, ff)
+    if drive["limit_fs"] is not None:
+        notes.append(f"drive: {drive['rms_fs']:.3g} FS rms, peaks about {drive['peak_fs']:.3g} FS, against the FB "
+                     f"model's drive limit {drive['limit_fs']:.3g} FS (its input nonlinearity's harmonics at -20 dB)"
+                     + ("" if drive["scale"] >= 1.0 else
+                        f": the driver would distort at this noise level; Q and W scaled by {drive['scale']:.3g} "
+                        "would keep it within, each band then between the controller's and no control's level "
+                        "(|1 + a G Q| is convex in a)"))
     predicted, overall, coherence = predict(fb_model, disturbance, options.latency, fb, ff)
     limits = band_limits(band_centres(), ff_limits, fb_bound)
     info = {
@@ -318,6 +349,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         "robustness_bound": ROBUSTNESS_BOUND,
         "board": {"instructions_per_sample": cost, "budget_cycles_per_sample": BOARD_CYCLES_PER_SAMPLE,
                   "fits": fits},
+        "drive": drive,
         "design_seconds_cpu": time.process_time() - started,
         "step_seconds_cpu": timing,
     }

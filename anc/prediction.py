@@ -23,7 +23,7 @@ from sysid.validation.compare import third_octave_bands
 from .disturbance import Disturbance
 
 __all__ = ["BANDS", "band_centres", "band_grid", "ear_psd", "band_attenuation", "overall_dba", "a_weighting",
-           "coherence_bound"]
+           "coherence_bound", "drive_psd"]
 
 BANDS = third_octave_bands(20.0, 2000.0)
 POINTS_PER_BAND = 24
@@ -56,6 +56,19 @@ def ear_psd(disturbance: Disturbance, loop=None, secondary_w=None) -> np.ndarray
     H = disturbance.coherent_response()
     return (np.abs(one_plus) ** 2 * disturbance.incoherent_psd()
             + disturbance.reference_psd * np.abs(gw + one_plus * H) ** 2)
+
+
+def drive_psd(disturbance: Disturbance, q=None, w=None) -> np.ndarray:
+    """Phi_yy of the drive on disturbance.frequencies_hz for Q and W (their responses on that grid, or None).
+
+    With the internal model exact the runtime's d_hat is the ear disturbance d = n + H x (n incoherent with
+    the chin, H the chin-coherent response), so the drive y = W x + Q d = (W + Q H) x + Q n."""
+    q = 0.0 if q is None else q
+    if not disturbance.has_reference:
+        return np.abs(q) ** 2 * disturbance.ear_psd
+    w = 0.0 if w is None else w
+    return (np.abs(q) ** 2 * disturbance.incoherent_psd()
+            + disturbance.reference_psd * np.abs(w + q * disturbance.coherent_response()) ** 2)
 
 
 def _ratio_db(off: np.ndarray, on: np.ndarray) -> float:

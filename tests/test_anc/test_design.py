@@ -199,3 +199,26 @@ def test_board_orders_fit_the_board_and_cut_only_what_does_not_fit():
         assert (q == 0) == (q_order == 0) and (w == 0) == (w_order == 0)
         if s_order < 100:
             assert board_cost(s_order, q, w) <= BOARD_CYCLES_PER_SAMPLE
+
+
+def test_the_drive_is_judged_against_the_fb_models_drive_limit():
+    """A saturating driver (tanh, scale 0.01 FS) gives a drive limit; the drive's rms follows the filters
+    linearly, so Q and W halved halve it, and the scale keeps the peaks at the limit."""
+    import dataclasses
+
+    from anc.controller import StateSpaceFilter
+    from anc.design import DRIVE_CREST_FACTOR, drive_level
+    from anc.disturbance import default_disturbance
+
+    s_model = appendix_a_model("fb")
+    q = StateSpaceFilter(np.array([[0.9]]), np.array([[1.0]]), np.array([[0.5]]), np.array([[0.2]]))
+    disturbance = default_disturbance(s_model.fs, None)
+    linear = drive_level(s_model, disturbance, q, None)
+    assert linear["limit_fs"] is None and linear["scale"] == 1.0 and linear["rms_fs"] > 0
+    half = StateSpaceFilter(q.A, q.B, 0.5 * q.C, 0.5 * q.D)
+    assert drive_level(s_model, disturbance, half, None)["rms_fs"] == pytest.approx(0.5 * linear["rms_fs"], rel=1e-9)
+    saturating = dataclasses.replace(s_model, input_nonlinearity_form={"kind": "tanh", "scale": 0.1 * linear["rms_fs"],
+                                                                       "gain": 1.0, "offset": 0.0})
+    judged = drive_level(saturating, disturbance, q, None)
+    assert 0 < judged["limit_fs"] < judged["peak_fs"] == pytest.approx(DRIVE_CREST_FACTOR * linear["rms_fs"])
+    assert judged["scale"] == pytest.approx(judged["limit_fs"] / judged["peak_fs"])
