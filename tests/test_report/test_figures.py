@@ -20,19 +20,8 @@ from sysid.core.lti import hankel_singular_values
 from sysid.core.model import Model
 from sysid.core.sections import second_order_sections, sections_response
 from sysid.estimation.spectra import response
-from sysid.findings import PROVIDERS, DiagnosisContext
+from sysid.findings import DiagnosisContext
 from sysid.validation.compare import compare
-
-
-@pytest.fixture(scope="module", autouse=True)
-def delay_scan_value():
-    """The delay scan's shared value ``"delay-scan"`` (best total delay, cost per total delay with NaN where
-    not evaluated), provided here as the delay detector's coarse scan where no provider is registered."""
-    with pytest.MonkeyPatch.context() as patch:
-        if "delay-scan" not in PROVIDERS:
-            from sysid.findings.delay import scan_delay
-            patch.setitem(PROVIDERS, "delay-scan", lambda ctx: scan_delay(ctx, coarse=True))
-        yield
 
 
 @pytest.fixture(scope="module")

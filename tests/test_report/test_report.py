@@ -15,7 +15,6 @@ from report import write_report
 from sysid.core.model import Model
 from sysid.core.plants import appendix_a_model
 from sysid.diagnose import diagnose
-from sysid.findings import PROVIDERS
 from sysid.simulate import simulate_session, write_session
 
 # The figures every report has (seed figures, validation, refinement), in page order.
@@ -32,17 +31,6 @@ def _image_ids(text):
 def _expected_finding_plots(findings):
     significant = [f["effect"] for f in findings if f["significant"]]
     return significant[:6] if significant else [max(findings, key=lambda f: f["score"])["effect"]]
-
-
-@pytest.fixture(scope="module", autouse=True)
-def delay_scan_value():
-    """The delay scan's shared value ``"delay-scan"`` (best total delay, cost per total delay with NaN where
-    not evaluated), provided here as the delay detector's coarse scan where no provider is registered."""
-    with pytest.MonkeyPatch.context() as patch:
-        if "delay-scan" not in PROVIDERS:
-            from sysid.findings.delay import scan_delay
-            patch.setitem(PROVIDERS, "delay-scan", lambda ctx: scan_delay(ctx, coarse=True))
-        yield
 
 
 @pytest.fixture(scope="module")
