@@ -63,6 +63,17 @@ def states_the_taps_need(session, comparison) -> int:
     return ladder.needed
 
 
+def assert_as_the_taps_have_it(top: dict, session, comparison, text: str) -> None:
+    """The named tail's length within 25 % of the taps' own (their band-limited envelope against the estimate's
+    noise, measured the same way) and its states within a factor 2 of what the taps need."""
+    fs = session.plant.fs
+    truth = length_above_noise(band_envelope(np.r_[session.plant.taps, np.zeros(int(0.02 * fs))], fs),
+                               top["evidence"]["noise_rms"], fs)
+    assert top["params"]["length_ms"] == pytest.approx(1e3 * truth, rel=0.25), text
+    needed = states_the_taps_need(session, comparison)
+    assert needed / 2 <= top["params"]["states"] <= 2 * needed, (needed, text)
+
+
 @pytest.mark.parametrize("name", sorted(CAPPED))
 def test_a_capped_measured_response_is_named_with_its_length_and_states(name):
     session, model, comparison = capped_case(name)
@@ -71,13 +82,7 @@ def test_a_capped_measured_response_is_named_with_its_length_and_states(name):
     top = findings.significant[0]
     assert top["effect"] == "reverberant-tail", text
     assert "under-modelled" not in [f["effect"] for f in findings.significant], text
-    # The taps' own length, measured the same way: their band-limited envelope against the estimate's noise.
-    fs = session.plant.fs
-    truth = length_above_noise(band_envelope(np.r_[session.plant.taps, np.zeros(int(0.02 * fs))], fs),
-                               top["evidence"]["noise_rms"], fs)
-    assert top["params"]["length_ms"] == pytest.approx(1e3 * truth, rel=0.25), text
-    needed = states_the_taps_need(session, comparison)
-    assert needed / 2 <= top["params"]["states"] <= 2 * needed, (needed, text)
+    assert_as_the_taps_have_it(top, session, comparison, text)
     # Its shape in the user's units, and the words.
     assert top["params"]["level_db"] < 0 and top["params"]["decay_db_per_ms"] > 0
     low, high = top["params"]["band_hz"]
@@ -112,12 +117,7 @@ def test_identify_s_own_capped_long_route_model_is_named_a_tail_not_a_delay(name
         assert ratios[1] > ratios[0] and delay["score"] < 1.0, text
     top = findings.significant[0]
     comparison = compare(model, session.sweeps)
-    fs = session.plant.fs
-    truth = length_above_noise(band_envelope(np.r_[session.plant.taps, np.zeros(int(0.02 * fs))], fs),
-                               top["evidence"]["noise_rms"], fs)
-    assert top["params"]["length_ms"] == pytest.approx(1e3 * truth, rel=0.25), text
-    needed = states_the_taps_need(session, comparison)
-    assert needed / 2 <= top["params"]["states"] <= 2 * needed, (needed, text)
+    assert_as_the_taps_have_it(top, session, comparison, text)
     auto = refine_auto(model, session.noise, session.sweeps, max_order=lifted)
     more = format_refinement(auto.steps, auto.stop_reason)
     assert auto.steps[0].effect == "reverberant-tail" and auto.steps[0].accepted, more
