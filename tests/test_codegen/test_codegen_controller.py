@@ -94,20 +94,26 @@ def test_headroom_is_the_l1_norm(plan):
     assert drive["saturates"] == (drive["worst_case_peak"] > 1.0)
 
 
+def _host_and_worst_case(generated, plan, part: str, length: int):
+    """(the part's generated filter built on the host, its impulse response over ``length`` samples, the
+    full-scale Q15 input that attains its L1 gain at the last sample: the reversed impulse response's signs)."""
+    name = FILTER_NAMES[part]
+    folder = generated.outdir
+    host = build_host(name, (folder / f"{name}_filter.h").read_text(), (folder / f"{name}_filter.c").read_text())
+    r = plan.plans[part].realisation
+    impulse = np.zeros(length)
+    impulse[0] = 1.0
+    h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
+    return host, h, np.where(h[::-1] >= 0, 32767, -32768).astype(np.int16)
+
+
 @pytest.mark.parametrize("part", ["model", "fb", "ff"])
 def test_worst_case_input_saturates_never_wraps(generated, plan, part):
     """The full-scale input that attains the L1 bound (the reversed signs of the impulse response),
     its negation and itself again: the generated C equals the saturating reference word for word
     (a wrap would differ by 65536); where no section can saturate it attains the linear bound, and
     the internal model (L1 gain 754) reaches the positive rail."""
-    name = FILTER_NAMES[part]
-    folder = generated.outdir
-    host = build_host(name, (folder / f"{name}_filter.h").read_text(), (folder / f"{name}_filter.c").read_text())
-    r = plan.plans[part].realisation
-    impulse = np.zeros(4000)
-    impulse[0] = 1.0
-    h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
-    worst = np.where(h[::-1] >= 0, 32767, -32768).astype(np.int16)
+    host, h, worst = _host_and_worst_case(generated, plan, part, 4000)
     worst = np.concatenate((worst, (-worst.astype(np.int32)).clip(-32768, 32767).astype(np.int16), worst))
     out = host.process_q15(worst)
     np.testing.assert_array_equal(out, fixed_reference(plan.fixed(part), worst))
@@ -125,14 +131,7 @@ def test_step_kernel_bit_exact_on_worst_case_inputs(generated, plan, part):
     negation and a full-scale square wave, alternating with process() blocks of 1, 4 and 37 samples
     on the same state (the two paths share it: section k's input history is section k - 1's
     output history): word for word the saturating reference."""
-    name = FILTER_NAMES[part]
-    folder = generated.outdir
-    host = build_host(name, (folder / f"{name}_filter.h").read_text(), (folder / f"{name}_filter.c").read_text())
-    r = plan.plans[part].realisation
-    impulse = np.zeros(3000)
-    impulse[0] = 1.0
-    h = lti.simulate(r.A, r.B, r.C, r.D, impulse)
-    worst = np.where(h[::-1] >= 0, 32767, -32768).astype(np.int16)
+    host, h, worst = _host_and_worst_case(generated, plan, part, 3000)
     square = np.where((np.arange(3000) // 40) % 2 == 0, 32767, -32768).astype(np.int16)
     x = np.concatenate((worst, (-worst.astype(np.int32)).clip(-32768, 32767).astype(np.int16), square))
     pieces, start, k = [], 0, 0
