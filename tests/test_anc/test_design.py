@@ -173,6 +173,18 @@ def test_cli_design_bad_latency_is_one_line_exit_2(tmp_path, capsys, value):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("value", ["0", "2", "many", "8.5"])
+def test_cli_design_bad_max_order_is_one_line_exit_2(tmp_path, capsys, value):
+    fb = tmp_path / "fb.json"
+    appendix_a_model("fb").save(fb)
+    out = tmp_path / "controller.json"
+    out.write_text("the user's own file")
+    assert main(["design", "--fb", str(fb), "--max-order", value, "-o", str(out), "--force"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "max" in err and "order" in err and "Traceback" not in err
+    assert out.read_text() == "the user's own file"
+
+
 def test_cli_design_help_states_the_boards_latency(capsys):
     with pytest.raises(SystemExit):
         main(["design", "--help"])
