@@ -90,12 +90,28 @@ def _fixed_sections(design: FixedDesign) -> list[dict]:
 
 
 def _float_sections(design: FloatDesign) -> list[dict]:
+    """Per section: the C statements of :mod:`codegen.float32`'s delta form, input node (v{k}, d{k}) with
+    previous sample (hv{k}, hd{k}), output node (v{k+1}, d{k+1}); zero coefficients left out."""
     rows = []
     for k, section in enumerate(design.sections):
-        terms = [f"{float_literal(b)} * " + (f"h{k}_{lag}" if lag else f"v{k}") for lag, b in enumerate(section.b) if b]
-        feedback = [f"{float_literal(c)} * h{k + 1}_{lag + 1}" for lag, c in enumerate(section.c) if c]
-        rows.append({"index": k, "order": section.order, "forward": " + ".join(terms) if terms else "0.0f",
-                     "feedback": feedback})
+        b0, m1, m2 = section.b
+        k1, k2 = section.c
+        taps = {3: [(b0, f"(d{k} - hd{k})"), (m1, f"hv{k}"), (m2, f"hd{k}")], 2: [(b0, f"d{k}"), (m1, f"hv{k}")],
+                1: [(b0, f"v{k}")], 0: []}[section.taps]
+        terms = [f"{float_literal(c)} * {x}" for c, x in taps if c != 0.0]
+        # C's + is left-associative: ((t0 + t1) + t2), the order of the Python twin.
+        forward = " + ".join(terms) if terms else "0.0f"
+        out, w1, e1 = k + 1, f"hv{k + 1}", f"hd{k + 1}"
+        if section.order == 0:
+            lines = [f"v{out} = f{out};", f"d{out} = v{out} - {w1};"]
+        else:
+            feedback = [f"{float_literal(k1)} * {w1}"] if k1 != 0.0 else []
+            if section.order == 2 and k2 != 0.0:
+                feedback.append(f"{float_literal(k2)} * {e1}")
+            lines = [f"f{out} = f{out} + {term};" for term in feedback]
+            lines += ([f"d{out} = {e1} + f{out};"] if section.order == 2 else [f"d{out} = f{out};"])
+            lines.append(f"v{out} = {w1} + d{out};")
+        rows.append({"index": k, "order": section.order, "forward": forward, "lines": lines})
     return rows
 
 

@@ -61,14 +61,21 @@ class FixedStepper:
 
 
 class Float32Stepper:
-    """The generated float32 filter of ``design`` (module :mod:`codegen.float32`), block by block."""
+    """The generated float32 filter of ``design`` (module :mod:`codegen.float32`, the delta form), sample by sample."""
 
     def __init__(self, design: FloatDesign):
         self.design = design
         self.sections = []
         for s in design.sections:
-            terms = [(_f32(b), lag) for lag, b in enumerate(s.b) if b != 0.0]
-            self.sections.append((s.order, terms, _f32(s.c[0]), _f32(s.c[1]), s.c[0] != 0.0, s.c[1] != 0.0))
+            b0, m1, m2 = (_f32(v) for v in s.b)
+            numerator = {3: [(b0, "dd"), (m1, "v1"), (m2, "d1")], 2: [(b0, "d0"), (m1, "v1")], 1: [(b0, "v0")],
+                         0: []}[s.taps]
+            numerator = [(c, role) for c, role in numerator if c != 0.0]
+            k1, k2 = (_f32(v) for v in s.c)
+            feedback = [(k1, 0)] if s.c[0] != 0.0 and s.order else []
+            if s.order == 2 and s.c[1] != 0.0:
+                feedback.append((k2, 1))
+            self.sections.append((s.order, numerator, feedback))
         self.reset()
 
     def reset(self) -> None:
@@ -91,24 +98,23 @@ class Float32Stepper:
                 p = _f32(a) + p * u
             v = p * u
         h = self.h
-        two = _f32(2.0)
-        for k, (order, terms, c1, c2, use_c1, use_c2) in enumerate(self.sections):
-            x = (v, h[k][0], h[k][1])
-            y1, y2 = h[k + 1]
-            t = terms[0][0] * x[terms[0][1]] if terms else _f32(0.0)
-            for b, lag in terms[1:]:
-                t = t + b * x[lag]
-            if use_c1:
-                t = t + c1 * y1
-            if use_c2:
-                t = t + c2 * y2
-            if order == 2:
-                t = t + (two * y1 - y2)
-            elif order == 1:
-                t = t + y1
-            h[k] = [v, x[1]]
-            v = t
-        h[-1] = [v, h[-1][0]]
+        d = v - h[0][0]
+        for k, (order, numerator, feedback) in enumerate(self.sections):
+            v1, d1 = h[k]
+            w1, e1 = h[k + 1]
+            h[k] = [v, d]
+            values = {"dd": d - d1, "v1": v1, "d1": d1, "d0": d, "v0": v}
+            f = numerator[0][0] * values[numerator[0][1]] if numerator else _f32(0.0)
+            for c, role in numerator[1:]:
+                f = f + c * values[role]
+            if order == 0:
+                v, d = f, f - w1
+                continue
+            for c, lag in feedback:
+                f = f + c * (w1 if lag == 0 else e1)
+            d = e1 + f if order == 2 else f
+            v = w1 + d
+        h[-1] = [v, d]
         return v
 
     def process(self, block) -> list:

@@ -121,9 +121,62 @@ def _float_prediction(cascade: Cascade, realised, fs: float) -> Prediction:
     return _assemble(cascade, realised, fs, roundoff)
 
 
+def _transfer(sections, k: int, w: np.ndarray, numerator) -> np.ndarray:
+    """numerator(z^-1) / A_k(z) times the sections after k at w (numerator as coefficients of z^0, z^-1, ...)."""
+    zi = np.exp(-1j * w)
+    section = sections[k]
+    response = np.polyval(list(numerator)[::-1], zi) / (section.a[0] + section.a[1] * zi + section.a[2] * zi**2)
+    for later in sections[k + 1:]:
+        response = response * later.response(w)
+    return response
+
+
 def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
-    """Prediction for the float32 variant of :mod:`codegen.float32`."""
-    return _float_prediction(cascade, [s.realised() for s in design.sections], fs)
+    """Prediction for the float32 variant of :mod:`codegen.float32` (the delta form).
+
+    Each float32 operation adds relative noise of variance 2^-48/3 on the power of its
+    result for a full-scale output sine averaged over the band: the numerator's operations
+    on f = b(z) x, the feedback's on t, the second difference of the output w, the
+    difference's accumulation e = e1 + t on e = (1 - z^-1) w; all of these enter the
+    difference state and reach the section's output through 1 / a(z). The rounding of
+    w = w1 + e enters the sample state and reaches it through (1 - a2 z^-1) / a(z) (two
+    poles; one pole: 1 / a(z); none: directly). The cascade input's difference adds one
+    operation on the input's. Each path continues through the sections after it.
+    """
+    w, band = _grids(cascade, fs)
+    sections = list(cascade.sections)
+    realised = [s.realised() for s in design.sections]
+    amplitude = 1.0 / float(np.max(np.abs(cascade_response(sections, band))))
+    zi = np.exp(-1j * band)
+    relative = 2.0**-48 / 3
+
+    def power(response) -> float:
+        return amplitude**2 / 2 * float(np.mean(np.abs(response) ** 2))
+
+    def gain(response) -> float:
+        return float(np.trapezoid(np.abs(response) ** 2, w) / np.pi)
+
+    # The input's difference d0 = v0 - v1: one operation on (1 - z^-1) x, through every section.
+    roundoff = relative * power(1 - zi) * gain(cascade_response(sections, w))
+    for k, (section, floating) in enumerate(zip(sections, design.sections)):
+        before = cascade_response(sections, band, k)
+        f = before * section.response(band) * np.polyval(list(section.a)[::-1], zi)
+        out = before * section.response(band)
+        numerator_ops = max(0, 2 * sum(1 for v in floating.b[: floating.taps] if v != 0.0) - 1) + (floating.taps == 3)
+        if section.order == 0:
+            later = cascade_response(sections[k + 1:], w)
+            roundoff += relative * (numerator_ops * power(f) + power(out * (1 - zi))) * gain(later)
+            continue
+        feedback_ops = 2 * sum(1 for v in floating.c[: section.order] if v != 0.0)
+        t = out * (1 - zi) ** section.order
+        into_difference = numerator_ops * power(f) + feedback_ops * power(t)
+        if section.order == 2:
+            into_difference += power(out * (1 - zi))
+        difference_gain = gain(_transfer(realised, k, w, (1.0,)))
+        sample_numerator = (1.0, -realised[k].a[2]) if section.order == 2 else (1.0,)
+        sample_gain = gain(_transfer(realised, k, w, sample_numerator))
+        roundoff += relative * (into_difference * difference_gain + power(out) * sample_gain)
+    return _assemble(cascade, realised, fs, roundoff)
 
 
 def predict_cmsis_f32(cascade: Cascade, tables, fs: float) -> Prediction:

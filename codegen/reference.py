@@ -26,7 +26,7 @@ from .fixedpoint import FixedDesign, FixedSection
 from .float32 import FloatDesign
 from .realise import Realisation
 
-__all__ = ["FixedFilter", "delay_signal", "fixed_input", "fixed_reference", "fixed_section", "q31_to_q15_output", "float32_reference", "float64_reference", "from_q15", "to_q15"]
+__all__ = ["FixedFilter", "delay_signal", "fixed_input", "fixed_reference", "fixed_section", "q31_to_q15_output", "float32_input", "float32_reference", "float32_section", "float64_reference", "from_q15", "to_q15"]
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
@@ -137,41 +137,71 @@ class FixedFilter:
         return q31_to_q15_output(x)
 
 
-def float32_reference(design: FloatDesign, u: np.ndarray) -> np.ndarray:
-    """Output (float32) of the generated float filter for float32 input u, from rest."""
+def float32_section(section, v: np.ndarray, d: np.ndarray, state=None) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """One float32 section in the delta form (:mod:`codegen.float32`) on its input node (v, d).
+
+    ``state`` is (v1, d1, w1, e1), the input's and the output's previous sample and difference
+    (None: from rest); returns the output node (w, e) and the state after the last sample.
+    """
+    f32 = np.float32
+    zero = f32(0.0)
+    v1, d1, w1, e1 = state or (zero, zero, zero, zero)
+    b0, m1, m2 = (f32(c) for c in section.b)
+    k1, k2 = (f32(c) for c in section.c)
+    v_prev = np.concatenate(([f32(v1)], v[:-1])).astype(f32)
+    d_prev = np.concatenate(([f32(d1)], d[:-1])).astype(f32)
+    terms = []
+    if section.taps == 3:
+        terms = [(b0, d - d_prev), (m1, v_prev), (m2, d_prev)]
+    elif section.taps == 2:
+        terms = [(b0, d), (m1, v_prev)]
+    elif section.taps == 1:
+        terms = [(b0, v)]
+    terms = [(c, x) for c, x in terms if c != 0.0]
+    f = terms[0][0] * terms[0][1] if terms else np.zeros_like(v)
+    for c, x in terms[1:]:
+        f = f + c * x
+    f = f.astype(f32)
+    if section.order == 0:
+        w = f
+        e = (w - np.concatenate(([f32(w1)], w[:-1]))).astype(f32)
+    else:
+        w, e = np.empty_like(v), np.empty_like(v)
+        use_k1, use_k2 = k1 != 0.0, section.order == 2 and k2 != 0.0
+        w1, e1 = f32(w1), f32(e1)
+        for n, t in enumerate(f):
+            if use_k1:
+                t = t + k1 * w1
+            if use_k2:
+                t = t + k2 * e1
+            e1 = e1 + t if section.order == 2 else t
+            w1 = w1 + e1
+            w[n], e[n] = w1, e1
+    if v.size:
+        state = (v[-1], d[-1], w[-1], e[-1])
+    return w, e, state
+
+
+def float32_input(design: FloatDesign, u: np.ndarray) -> np.ndarray:
+    """float32 cascade input for float32 input u from rest: delay, then the input polynomial by Horner."""
     f32 = np.float32
     u = delay_signal(np.asarray(u, dtype=f32), design.delay)
     if design.polynomial is None:
-        x = u
-    else:
-        # Horner: v = a_K; v = a_k + v u; ...; x = v u (all float32).
-        acc = np.full(u.shape, design.polynomial[-1], dtype=f32)
-        for a in design.polynomial[-2::-1]:
-            acc = f32(a) + acc * u
-        x = acc * u
-    two = f32(2.0)
+        return u
+    # Horner: v = a_K; v = a_k + v u; ...; x = v u (all float32).
+    acc = np.full(u.shape, design.polynomial[-1], dtype=f32)
+    for a in design.polynomial[-2::-1]:
+        acc = f32(a) + acc * u
+    return acc * u
+
+
+def float32_reference(design: FloatDesign, u: np.ndarray) -> np.ndarray:
+    """Output (float32) of the generated float filter for float32 input u, from rest."""
+    v = float32_input(design, u)
+    d = (v - _history(v, 1)).astype(np.float32)
     for section in design.sections:
-        terms = [(f32(b), _history(x, lag)) for lag, b in enumerate(section.b) if b != 0.0]
-        forward = terms[0][0] * terms[0][1] if terms else np.zeros_like(x)
-        for b, xl in terms[1:]:
-            forward = forward + b * xl
-        c1, c2 = f32(section.c[0]), f32(section.c[1])
-        use_c1, use_c2 = section.c[0] != 0.0, section.c[1] != 0.0
-        y = np.empty_like(x)
-        y1 = y2 = f32(0.0)
-        for n, t in enumerate(forward):
-            if use_c1:
-                t = t + c1 * y1
-            if use_c2:
-                t = t + c2 * y2
-            if section.order == 2:
-                t = t + (two * y1 - y2)
-            elif section.order == 1:
-                t = t + y1
-            y2, y1 = y1, t
-            y[n] = t
-        x = y
-    return x
+        v, d, _ = float32_section(section, v, d)
+    return v
 
 
 def float64_reference(realisation: Realisation, u: np.ndarray, input_polynomial=None) -> np.ndarray:
