@@ -84,7 +84,9 @@ def generate_controller_firmware(controller, outdir, *, variant: str = "both", m
                                  quantiser: str = "efb", force: bool = False, progress=None) -> Manifest:
     """Generate the control path's filters of ``controller`` (an :class:`anc.controller.Controller`
     or a path to its JSON) into ``outdir`` (:func:`codegen.controller.plan_controller`); returns the
-    :class:`codegen.manifest.Manifest`. The output-folder rules are those of ``generate_firmware``."""
+    :class:`codegen.manifest.Manifest`. The output-folder rules are those of ``generate_firmware``.
+    A requested variant that misses ``min_snr`` in any filter is left out of every filter; the
+    manifest's ``variants`` lists those generated and ``refused`` each left out with its reason."""
     check_output(outdir, force)
     if progress is not None:
         progress(0, 3, "design")
@@ -110,7 +112,7 @@ def generate_controller_firmware(controller, outdir, *, variant: str = "both", m
                                      # The control path's processing latency is 2 x ANC_CONTROL_BLOCK
                                      # (firmware/anc_control.h).
                                      "largest_control_block": min(CONTROL_BLOCK_MAX, plan.latency_samples // 2)},
-                         filters=filters, headroom=plan.headroom)
+                         filters=filters, headroom=plan.headroom, variants=plan.variants, refused=plan.refused)
     data = json_ready(data)
     if progress is not None:
         progress(2, 3, "write")

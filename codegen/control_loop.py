@@ -61,7 +61,7 @@ class FixedStepper:
 
 
 class Float32Stepper:
-    """The generated float32 filter of ``design`` (module :mod:`codegen.float32`, the delta form), sample by sample."""
+    """The generated float32 filter of ``design`` (module :mod:`codegen.float32`), sample by sample."""
 
     def __init__(self, design: FloatDesign):
         self.design = design
@@ -71,16 +71,20 @@ class Float32Stepper:
             numerator = {3: [(b0, "dd"), (m1, "v1"), (m2, "d1")], 2: [(b0, "d0"), (m1, "v1")], 1: [(b0, "v0")],
                          0: []}[s.taps]
             numerator = [(c, role) for c, role in numerator if c != 0.0]
-            k1, k2 = (_f32(v) for v in s.c)
-            feedback = [(k1, 0)] if s.c[0] != 0.0 and s.order else []
-            if s.order == 2 and s.c[1] != 0.0:
-                feedback.append((k2, 1))
-            self.sections.append((s.order, numerator, feedback))
+            if s.order == 2:
+                output = [(_f32(c), i) for i, c in enumerate(s.c) if c != 0.0]
+                rows = [[(_f32(c), j) for j, c in enumerate(s.n[2 * i: 2 * i + 2]) if c != 0.0]
+                        + ([(_f32(s.g[i]), "input")] if s.g[i] != 0.0 else []) for i in range(2)]
+                poles = (output, rows)
+            else:
+                poles = _f32(s.c[0]) if s.order == 1 and s.c[0] != 0.0 else None
+            self.sections.append((s.order, numerator, poles))
         self.reset()
 
     def reset(self) -> None:
         zero = _f32(0.0)
         self.h = [[zero, zero] for _ in range(len(self.sections) + 1)]
+        self.s = [[zero, zero] for _ in self.sections]
         self.line = [zero] * self.design.delay
         self.pos = 0
 
@@ -99,21 +103,37 @@ class Float32Stepper:
             v = p * u
         h = self.h
         d = v - h[0][0]
-        for k, (order, numerator, feedback) in enumerate(self.sections):
+        for k, (order, numerator, poles) in enumerate(self.sections):
             v1, d1 = h[k]
-            w1, e1 = h[k + 1]
+            w1 = h[k + 1][0]
             h[k] = [v, d]
             values = {"dd": d - d1, "v1": v1, "d1": d1, "d0": d, "v0": v}
             f = numerator[0][0] * values[numerator[0][1]] if numerator else _f32(0.0)
             for c, role in numerator[1:]:
                 f = f + c * values[role]
-            if order == 0:
+            if order == 2:
+                output, rows = poles
+                states = self.s[k]
+                w = f
+                for c, i in output:
+                    w = w + c * states[i]
+                new = []
+                for i, row in enumerate(rows):
+                    if not row:
+                        new.append(states[i])
+                        continue
+                    terms = [c * (v if j == "input" else states[j]) for c, j in row]
+                    increment = terms[0]
+                    for term in terms[1:]:
+                        increment = increment + term
+                    new.append(states[i] + increment)
+                self.s[k] = new
+                v, d = w, w - w1
+            elif order == 1:
+                t = f if poles is None else f + poles * w1
+                v, d = w1 + t, t
+            else:
                 v, d = f, f - w1
-                continue
-            for c, lag in feedback:
-                f = f + c * (w1 if lag == 0 else e1)
-            d = e1 + f if order == 2 else f
-            v = w1 + d
         h[-1] = [v, d]
         return v
 

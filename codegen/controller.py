@@ -4,7 +4,9 @@
 (:func:`codegen.plan.plan_firmware`: balanced realisation, sections, scaling, Q15 with error
 feedback and float32 variants, the same refusals): ``ctl_s`` the internal model S_model,
 ``ctl_q`` the feedback filter Q and ``ctl_w`` the feed-forward filter W (each only when the
-controller has it). It is the plan step of a controller's firmware: it reads the controller
+controller has it). A variant whose predicted SNR misses --min-snr in any of the filters is not
+generated for any of them (the control path runs one variant throughout) and the reason is kept
+(``ControllerPlan.refused``); only when no requested variant is left is the controller refused. It is the plan step of a controller's firmware: it reads the controller
 from :mod:`anc.controller` (below ``codegen``) and imports no step after the plan;
 :func:`codegen.api.generate_controller_firmware` renders the filters with the model
 templates, adds ``controller_config.h`` (latency and which filters exist, read by
@@ -25,7 +27,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.signal
@@ -33,8 +35,9 @@ import scipy.signal
 from anc.controller import BOARD_LATENCY_SAMPLES, Controller
 from sysid.core.model import Model
 
-from .errors import CodegenError
+from .errors import CodegenError, PrecisionError
 from .plan import Plan, plan_firmware
+from .targets import get_target, refusal_reason
 
 __all__ = ["CONTROL_BLOCK_MAX", "FILTER_NAMES", "ControllerPlan", "format_headroom_table", "headroom",
            "plan_controller"]
@@ -49,13 +52,24 @@ _LABELS = {"model": "internal model S", "fb": "controller Q", "ff": "controller 
 
 @dataclass
 class ControllerPlan:
-    """The plans of the controller's filters (keys 'model', 'fb', 'ff'), its latency and headroom."""
+    """The plans of the controller's filters (keys 'model', 'fb', 'ff'), its latency and headroom.
+
+    ``refused`` maps a requested variant that is not generated ('q15', 'float') to the one-line
+    reason (the first filter whose predicted SNR misses --min-snr in it); the plans hold only the
+    variants generated.
+    """
 
     controller: Controller
     plans: dict[str, Plan]
     latency_samples: int
     controller_file: str | None = None
     headroom: dict = field(default_factory=dict)
+    refused: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def variants(self) -> list[str]:
+        """The variants generated (keys of the generic target, in its order)."""
+        return list(next(iter(self.plans.values())).predictions)
 
     def fixed(self, part: str):
         return self.plans[part].fixed if part in self.plans else None
@@ -151,11 +165,35 @@ def plan_controller(controller, *, variant: str = "both", min_snr: float = 30.0,
             continue
         model = source if part == "model" else _filter_model(source, controller.fs, "fb" if part == "fb" else "ff")
         try:
-            plans[part] = plan_firmware(model, variant=variant, min_snr=min_snr, quantiser=quantiser)
+            # Every variant designed whatever its SNR: a variant is refused for the controller as a whole below.
+            plans[part] = plan_firmware(model, variant=variant, min_snr=-math.inf, quantiser=quantiser)
         except CodegenError as exc:
             raise type(exc)(f"{_LABELS[part]}: {exc}") from None
+    refused = {}
+    for key in get_target("generic").variants:
+        for part, plan in plans.items():
+            prediction = plan.predictions.get(key)
+            if prediction is not None and prediction.snr_db < min_snr:
+                refused[key] = f"{_LABELS[part]}: {refusal_reason(f'{key} variant', prediction, min_snr)}"
+                break
+    kept = [key for key in next(iter(plans.values())).predictions if key not in refused]
+    if not kept:
+        # Nothing to run: the first filter's first refused variant, as generating that filter alone says it.
+        for part, plan in plans.items():
+            for key, prediction in plan.predictions.items():
+                if prediction.snr_db < min_snr:
+                    raise PrecisionError(f"{_LABELS[part]}: {refusal_reason(f'{key} variant', prediction, min_snr)}")
+    plans = {part: _keeping(plan, kept, min_snr) for part, plan in plans.items()}
     return ControllerPlan(controller=controller, plans=plans, latency_samples=int(controller.latency_samples),
-                          controller_file=controller_file, headroom=headroom(plans))
+                          controller_file=controller_file, headroom=headroom(plans), refused=refused)
+
+
+def _keeping(plan: Plan, keys: list[str], min_snr: float) -> Plan:
+    """``plan`` with only the variants ``keys`` (their designs and predictions) and the requested --min-snr."""
+    spec = plan.spec
+    fields = {spec.variants[key].plan_field for key in keys}
+    return replace(plan, designs={f: d for f, d in plan.designs.items() if f in fields},
+                   predictions={k: v for k, v in plan.predictions.items() if k in keys}, min_snr_db=float(min_snr))
 
 
 def format_headroom_table(headroom_data: dict) -> str:

@@ -1,36 +1,41 @@
-"""Float32 design of a section cascade: sections in the delta operator's difference form.
+"""Float32 design of a section cascade: delta-form numerators, two-pole recursions in balanced state space.
 
 Every node of the cascade (its input, each section's output) carries a sample v and its
 first difference d = v[n] - v[n-1]. Each section computes, in float32 and in exactly this
 order (the generated C, :func:`codegen.reference.float32_reference` and the control path's
-twin share it; terms whose coefficient is exactly zero are left out of all three),
+twin share it; terms whose coefficient is exactly zero are left out of all three), first its
+numerator from the input node (v, d), ``1`` marking the previous sample,
 
-    f = (b0 (d0 - d1) + m1 v1) + m2 d1                    (numerator, three taps)
-    t = (f + k1 w1) + k2 e1;  e = e1 + t;  w = w1 + e      (two poles)
+    f = (b0 (d0 - d1) + m1 v1) + m2 d1        (three taps; two: f = b0 d0 + m1 v1; one: b0 v0)
 
-with (v, d) the section's input node and (w, e) its output node, ``1`` marking the previous
-sample; a one-pole section has e = f + k1 w1, w = w1 + e, a section without poles w = f,
-e = w - w1, and a two-tap numerator f = b0 d0 + m1 v1. The stored coefficients are the
-section's polynomials expanded around z = 1 (the delta operator delta = 1 - z^-1;
-Middleton & Goodwin, "Improved finite word length characteristics in digital control
-using delta operators", IEEE TAC 31(11), 1986):
+then its poles, giving the output node (w, e):
 
-    b(z) = b0 delta^2 + m1 z^-1 + m2 z^-1 delta,   m1 = b(1) = b0 + b1 + b2,  m2 = b0 - b2
-    a(z) = delta^2 - k1 z^-1 - k2 z^-1 delta,      k1 = -a(1) = -(1 + a1 + a2),  k2 = a2 - 1
+    two poles:  w = (f + c1 s1) + c2 s2;  s_i += ((n_i1 s1 + n_i2 s2) + g_i f) (i = 1, 2, both from
+                the old s);  e = w - w1
+    one pole:   e = f + k1 w1;  w = w1 + e
+    no pole:    w = f;  e = w - w1
 
-For poles and zeros near z = 1 these are the small numbers a float32 keeps to its relative
-precision: a1 ~ -2 stored plainly loses the distance of the poles from z = 1 (1e-4 on the
-designed controllers: 24 bits of 2 leave 1e-7 absolute, 1e-3 of it), and b0, b1, b2 of a
-zero pair 1e-4 from the unit circle near 20 Hz sum to 1e-5 of b0, so plainly stored their
-notch moved (coefficient SNR 23-27 dB against 85-107 dB in this form, the designed
-controllers of the seed pair). The states are differences too: the rounding of w = w1 + e
-reaches the output through (1 - a2 z^-1) / a(z), not 1 / a(z) as a direct form's output
-rounding does, and that of e is relative to the difference's own, smaller, magnitude
-(W of the seed pair, poles 2.4e-4 from the unit circle: predicted round-off SNR 22 dB in
-the direct form's delta-coefficient variant, see :mod:`codegen.noise` for this one).
+The numerator is expanded around z = 1 (the delta operator delta = 1 - z^-1; Middleton &
+Goodwin, "Improved finite word length characteristics in digital control using delta
+operators", IEEE TAC 31(11), 1986): b(z) = b0 delta^2 + m1 z^-1 + m2 z^-1 delta with
+m1 = b(1) = b0 + b1 + b2 and m2 = b0 - b2, so a zero pair near the unit circle close to
+z = 1 is held by the small m1, m2 to float32's relative precision (plain b0, b1, b2 of a zero
+pair 1e-4 from the unit circle near 20 Hz sum to 1e-5 of b0 and their notch moved:
+coefficient SNR 23-27 dB on the designed controllers against 85-120 dB here).
 
-Below the steps of firmware generation: a design module (it imports the sections only)
-that the generic target's float variant runs.
+Two poles run 1 / a(z) = 1 + G(z) with G(z) = (-a1 z - a2) / (z^2 + a1 z + a2) in the balanced
+realisation (A, g, c) of G (Moore 1981, :func:`sysid.core.lti.minimal_balanced_realisation`,
+from its normal form [[sigma, -omega], [omega, sigma]] or, for real poles, a chain), stored as
+N = A - I (the delta operator's state matrix: entries of the size of the poles' distance from
+z = 1, kept to relative precision). A direct form's rounding reaches the output through
+1 / a(z), whose noise gain is about 1 / (4 r (r^2 + theta^2)) for poles at distance r from the
+unit circle and angle theta (1e11 at 1e-4: float32 rounding 46 dB below the signal at best);
+the balanced states' rounding reaches it with a gain of order 1 / r (Mullis & Roberts,
+"Synthesis of minimum roundoff noise fixed point digital filters", IEEE TCAS 23(9), 1976).
+One pole keeps the delta form (its noise gain is 1 / (1 - p^2) already).
+
+Below the steps of firmware generation: a design module (it imports the sections and
+``sysid.core.lti``) that the generic target's float variant runs.
 """
 
 from __future__ import annotations
@@ -39,31 +44,59 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sysid.core.lti import minimal_balanced_realisation
+
 from .sections import Cascade, Section
 
-__all__ = ["FloatDesign", "FloatSection", "delta_form", "design_float32"]
+__all__ = ["FloatDesign", "FloatSection", "RealisedSection", "delta_form", "design_float32", "state_realisation"]
+
+
+@dataclass(frozen=True)
+class RealisedSection:
+    """A section as float64 polynomials in z^-1 (numerator of any length), for its frequency response."""
+
+    b: tuple[float, ...]
+    a: tuple[float, float, float]
+    order: int
+
+    def response(self, w: np.ndarray) -> np.ndarray:
+        zi = np.exp(-1j * np.asarray(w))
+        return np.polyval(self.b[::-1], zi) / np.polyval(self.a[::-1], zi)
 
 
 @dataclass(frozen=True)
 class FloatSection:
-    """float32 numerator (b0, m1, m2) and feedback (k1, k2) of one section in the delta form.
+    """float32 coefficients of one section (module docstring).
 
-    ``taps`` is the numerator's length (0-3): three taps use (b0, m1, m2), two use
-    (b0, m1) with m1 = b0 + b1, one uses b0 alone (f = b0 v0).
+    A two-pole section holds its balanced state space: ``b`` = (D, 0, 0) (``taps`` 1),
+    ``n`` = (n11, n12, n21, n22) = A - I, ``g`` = (g1, g2) = B and ``c`` = (c1, c2) = C. Otherwise
+    ``taps`` is the numerator's length (0-3) and ``b`` its delta form (b0, m1, m2) (two taps:
+    m1 = b0 + b1, m2 = 0), a one-pole section has ``c`` = (k1, 0) with k1 = -(1 + a1) and empty
+    ``n``, ``g``.
     """
 
     order: int
     taps: int
     b: tuple[float, float, float]
     c: tuple[float, float]
+    n: tuple[float, ...] = ()
+    g: tuple[float, ...] = ()
 
-    def realised(self) -> Section:
-        """The section these float32 numbers implement, as float64 b and a (exact in float64)."""
+    def realised(self) -> RealisedSection:
+        """The section these float32 numbers implement, as float64 polynomials (exact but for the last bits)."""
         b0, m1, m2 = (float(v) for v in self.b)
-        k1, k2 = (float(v) for v in self.c)
         b = {3: (b0, m1 + m2 - 2.0 * b0, b0 - m2), 2: (b0, m1 - b0, 0.0), 1: (b0, 0.0, 0.0), 0: (0.0, 0.0, 0.0)}[self.taps]
-        a = {2: (1.0, -2.0 - k1 - k2, 1.0 + k2), 1: (1.0, -1.0 - k1, 0.0), 0: (1.0, 0.0, 0.0)}[self.order]
-        return Section(b=b, a=a, poles=tuple(np.roots(a[: self.order + 1]).astype(complex)), zeros=())
+        if self.order == 2:
+            A = np.eye(2) + np.array(self.n, float).reshape(2, 2)
+            g, c = np.array(self.g, float), np.array(self.c, float)
+            a = (1.0, -float(np.trace(A)), float(np.linalg.det(A)))
+            # D + c (zI - A)^-1 g = (D (z^2 + a1 z + a2) + (c.g) z + c adj(-A) g) / (z^2 + a1 z + a2).
+            adjugate = np.array([[-A[1, 1], A[0, 1]], [A[1, 0], -A[0, 0]]])
+            b = (b0, b0 * a[1] + float(c @ g), b0 * a[2] + float(c @ adjugate @ g))
+            return RealisedSection(b=b, a=a, order=2)
+        k1 = float(self.c[0])
+        a = (1.0, -1.0 - k1, 0.0) if self.order == 1 else (1.0, 0.0, 0.0)
+        return RealisedSection(b=b, a=a, order=self.order)
 
 
 @dataclass(frozen=True)
@@ -80,7 +113,8 @@ def _f32(value: float) -> float:
 
 
 def delta_form(section: Section) -> tuple[int, tuple[float, float, float], tuple[float, float]]:
-    """(taps, (b0, m1, m2), (k1, k2)) of a section in float64 (module docstring)."""
+    """(taps, (b0, m1, m2), (k1, k2)) of a section in float64: the numerator and the feedback
+    -a(1), a2 - 1 expanded around z = 1 (module docstring)."""
     b0, b1, b2 = (float(v) for v in section.b)
     a1, a2 = float(section.a[1]), float(section.a[2])
     taps = 3 if b2 != 0.0 else 2 if b1 != 0.0 else 1 if b0 != 0.0 else 0
@@ -89,12 +123,41 @@ def delta_form(section: Section) -> tuple[int, tuple[float, float, float], tuple
     return taps, numerator, feedback
 
 
+def state_realisation(section: Section) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(N = A - I, g, c, D) in float64 of the balanced realisation of a two-pole section's b(z) / a(z)."""
+    b0, b1, b2 = (float(v) for v in section.b)
+    a1, a2 = float(section.a[1]), float(section.a[2])
+    poles = np.asarray(section.poles, complex)
+    # b / a = b0 + (r1 z + r0) / (z^2 + a1 z + a2).
+    r1, r0 = b1 - b0 * a1, b2 - b0 * a2
+    if abs(poles[0].imag) > 0.0:
+        sigma, omega = poles[0].real, abs(poles[0].imag)
+        # Normal form: (zI - A)^-1 [1, 0]^T = [z - sigma, omega]^T / ((z - sigma)^2 + omega^2).
+        A = np.array([[sigma, -omega], [omega, sigma]])
+        C = np.array([[r1, (r0 + r1 * sigma) / omega]])
+    else:
+        p1, p2 = sorted(float(p.real) for p in poles)
+        # Chain: (zI - A)^-1 [1, 0]^T = [1 / (z - p1), 1 / ((z - p1)(z - p2))]^T (coincident poles too).
+        A = np.array([[p1, 0.0], [1.0, p2]])
+        C = np.array([[r1, r0 + r1 * p2]])
+    B = np.array([[1.0], [0.0]])
+    balanced = minimal_balanced_realisation(A, B, C, b0)
+    if balanced.A.shape[0] == 2:
+        A, B, C = balanced.A, balanced.B, balanced.C
+    return A - np.eye(2), B.ravel(), C.ravel(), b0
+
+
 def design_float32(cascade: Cascade, delay: int, input_polynomial=None) -> FloatDesign:
-    """Round the cascade's delta-form coefficients to float32 (values kept as exact Python floats)."""
+    """Round the cascade's coefficients in the forms of the module docstring to float32 (kept as exact floats)."""
     sections = []
     for s in cascade.sections:
         taps, numerator, feedback = delta_form(s)
-        sections.append(FloatSection(order=s.order, taps=taps, b=tuple(_f32(v) for v in numerator),
-                                     c=tuple(_f32(v) for v in feedback)))
+        b = tuple(_f32(v) for v in numerator)
+        if s.order == 2:
+            N, g, c, direct = state_realisation(s)
+            sections.append(FloatSection(order=2, taps=1, b=(_f32(direct), 0.0, 0.0), c=tuple(_f32(v) for v in c),
+                                         n=tuple(_f32(v) for v in N.ravel()), g=tuple(_f32(v) for v in g)))
+        else:
+            sections.append(FloatSection(order=s.order, taps=taps, b=b, c=tuple(_f32(v) for v in feedback)))
     poly = None if input_polynomial is None else tuple(_f32(a) for a in input_polynomial)
     return FloatDesign(sections=tuple(sections), delay=int(delay), polynomial=poly)

@@ -121,62 +121,76 @@ def _float_prediction(cascade: Cascade, realised, fs: float) -> Prediction:
     return _assemble(cascade, realised, fs, roundoff)
 
 
-def _transfer(sections, k: int, w: np.ndarray, numerator) -> np.ndarray:
-    """numerator(z^-1) / A_k(z) times the sections after k at w (numerator as coefficients of z^0, z^-1, ...)."""
-    zi = np.exp(-1j * w)
-    section = sections[k]
-    response = np.polyval(list(numerator)[::-1], zi) / (section.a[0] + section.a[1] * zi + section.a[2] * zi**2)
-    for later in sections[k + 1:]:
-        response = response * later.response(w)
-    return response
+def _state_responses(section, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(zI - A)^-1 g and c (zI - A)^-1 row by row for a two-pole float32 section (A = I + N), at z (arrays of 2 x len(z))."""
+    A = np.eye(2) + np.array(section.n, float).reshape(2, 2)
+    g, c = np.array(section.g, float), np.array(section.c, float)
+    det = (z - A[0, 0]) * (z - A[1, 1]) - A[0, 1] * A[1, 0]
+    # adj(zI - A) = [[z - A11, A01], [A10, z - A00]].
+    forward = np.array([(z - A[1, 1]) * g[0] + A[0, 1] * g[1], A[1, 0] * g[0] + (z - A[0, 0]) * g[1]]) / det
+    backward = np.array([c[0] * (z - A[1, 1]) + c[1] * A[1, 0], c[0] * A[0, 1] + c[1] * (z - A[0, 0])]) / det
+    return forward, backward
 
 
 def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
-    """Prediction for the float32 variant of :mod:`codegen.float32` (the delta form).
+    """Prediction for the float32 variant of :mod:`codegen.float32`.
 
-    Each float32 operation adds relative noise of variance 2^-48/3 on the power of its
-    result for a full-scale output sine averaged over the band: the numerator's operations
-    on f = b(z) x, the feedback's on t, the second difference of the output w, the
-    difference's accumulation e = e1 + t on e = (1 - z^-1) w; all of these enter the
-    difference state and reach the section's output through 1 / a(z). The rounding of
-    w = w1 + e enters the sample state and reaches it through (1 - a2 z^-1) / a(z) (two
-    poles; one pole: 1 / a(z); none: directly). The cascade input's difference adds one
-    operation on the input's. Each path continues through the sections after it.
+    Each float32 operation adds relative noise of variance 2^-48/3 on the power of its result
+    for a full-scale output sine, at every frequency of the band; the worst frequency counts
+    (a relative noise follows the signal, so a low sine through a high gain is where it is
+    largest). A
+    two-pole section (balanced state space): D x and the output sum go straight on, each
+    state's increment and accumulation reach the output through c (zI - A)^-1 e_i. Other
+    sections: the numerator's operations on f = b(z) x and a one-pole section's on its
+    difference and sample reach it through 1 / a(z). The difference e = w - w1 and the cascade
+    input's difference count on their own powers. Every path continues through the sections
+    after it.
     """
     w, band = _grids(cascade, fs)
     sections = list(cascade.sections)
     realised = [s.realised() for s in design.sections]
-    amplitude = 1.0 / float(np.max(np.abs(cascade_response(sections, band))))
-    zi = np.exp(-1j * band)
+    # A full-scale output sine at each band frequency: the input amplitude 1 / |H| there.
+    amplitude = 1.0 / np.maximum(np.abs(cascade_response(sections, band)), 1e-300)
+    z_band, z = np.exp(1j * band), np.exp(1j * w)
     relative = 2.0**-48 / 3
 
-    def power(response) -> float:
-        return amplitude**2 / 2 * float(np.mean(np.abs(response) ** 2))
+    def power(response) -> np.ndarray:
+        return amplitude**2 / 2 * np.abs(response) ** 2
 
     def gain(response) -> float:
         return float(np.trapezoid(np.abs(response) ** 2, w) / np.pi)
 
-    # The input's difference d0 = v0 - v1: one operation on (1 - z^-1) x, through every section.
-    roundoff = relative * power(1 - zi) * gain(cascade_response(sections, w))
+    roundoff = relative * power(1 - 1 / z_band) * gain(cascade_response(sections, w))
     for k, (section, floating) in enumerate(zip(sections, design.sections)):
+        later = cascade_response(sections[k + 1:], w)
         before = cascade_response(sections, band, k)
-        f = before * section.response(band) * np.polyval(list(section.a)[::-1], zi)
         out = before * section.response(band)
+        f = out * np.polyval(list(section.a)[::-1], 1 / z_band)
         numerator_ops = max(0, 2 * sum(1 for v in floating.b[: floating.taps] if v != 0.0) - 1) + (floating.taps == 3)
-        if section.order == 0:
-            later = cascade_response(sections[k + 1:], w)
-            roundoff += relative * (numerator_ops * power(f) + power(out * (1 - zi))) * gain(later)
+        own = realised[k]
+        through_poles = gain(later / np.polyval(list(own.a)[::-1], 1 / z))
+        difference = relative * power(out * (1 - 1 / z_band)) * gain(later)
+        if floating.order == 2:
+            # The state space of the whole section: D x and the output sum go straight on, the states'
+            # rounding through c (zI - A)^-1 e_i.
+            forward, _ = _state_responses(floating, z_band)
+            _, backward = _state_responses(floating, z)
+            output_ops = 1 + 2 * sum(1 for v in floating.c if v != 0.0)
+            roundoff += relative * (output_ops * power(out) * gain(later)) + difference
+            for i in range(2):
+                state = before * forward[i]
+                terms = sum(1 for v in floating.n[2 * i: 2 * i + 2] if v != 0.0) + (floating.g[i] != 0.0)
+                injected = max(0, 2 * terms - 1) * power(state * (z_band - 1)) + power(state)
+                roundoff += relative * injected * gain(backward[i] * later)
             continue
-        feedback_ops = 2 * sum(1 for v in floating.c[: section.order] if v != 0.0)
-        t = out * (1 - zi) ** section.order
-        into_difference = numerator_ops * power(f) + feedback_ops * power(t)
-        if section.order == 2:
-            into_difference += power(out * (1 - zi))
-        difference_gain = gain(_transfer(realised, k, w, (1.0,)))
-        sample_numerator = (1.0, -realised[k].a[2]) if section.order == 2 else (1.0,)
-        sample_gain = gain(_transfer(realised, k, w, sample_numerator))
-        roundoff += relative * (into_difference * difference_gain + power(out) * sample_gain)
-    return _assemble(cascade, realised, fs, roundoff)
+        roundoff += relative * numerator_ops * power(f) * through_poles
+        if floating.order == 1:
+            feedback_ops = 2 if floating.c[0] != 0.0 else 0
+            roundoff += relative * (feedback_ops * power(out * (1 - 1 / z_band)) + power(out)) * through_poles
+        else:
+            roundoff += difference
+    # The worst sine of the band.
+    return _assemble(cascade, realised, fs, float(np.max(roundoff)))
 
 
 def predict_cmsis_f32(cascade: Cascade, tables, fs: float) -> Prediction:

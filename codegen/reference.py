@@ -26,7 +26,7 @@ from .fixedpoint import FixedDesign, FixedSection
 from .float32 import FloatDesign
 from .realise import Realisation
 
-__all__ = ["FixedFilter", "delay_signal", "fixed_input", "fixed_reference", "fixed_section", "q31_to_q15_output", "float32_input", "float32_reference", "float32_section", "float64_reference", "from_q15", "to_q15"]
+__all__ = ["FixedFilter", "delay_signal", "fixed_input", "fixed_reference", "fixed_section", "q31_to_q15_output", "float32_input", "float32_reference", "float64_reference", "from_q15", "to_q15"]
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
@@ -137,51 +137,6 @@ class FixedFilter:
         return q31_to_q15_output(x)
 
 
-def float32_section(section, v: np.ndarray, d: np.ndarray, state=None) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """One float32 section in the delta form (:mod:`codegen.float32`) on its input node (v, d).
-
-    ``state`` is (v1, d1, w1, e1), the input's and the output's previous sample and difference
-    (None: from rest); returns the output node (w, e) and the state after the last sample.
-    """
-    f32 = np.float32
-    zero = f32(0.0)
-    v1, d1, w1, e1 = state or (zero, zero, zero, zero)
-    b0, m1, m2 = (f32(c) for c in section.b)
-    k1, k2 = (f32(c) for c in section.c)
-    v_prev = np.concatenate(([f32(v1)], v[:-1])).astype(f32)
-    d_prev = np.concatenate(([f32(d1)], d[:-1])).astype(f32)
-    terms = []
-    if section.taps == 3:
-        terms = [(b0, d - d_prev), (m1, v_prev), (m2, d_prev)]
-    elif section.taps == 2:
-        terms = [(b0, d), (m1, v_prev)]
-    elif section.taps == 1:
-        terms = [(b0, v)]
-    terms = [(c, x) for c, x in terms if c != 0.0]
-    f = terms[0][0] * terms[0][1] if terms else np.zeros_like(v)
-    for c, x in terms[1:]:
-        f = f + c * x
-    f = f.astype(f32)
-    if section.order == 0:
-        w = f
-        e = (w - np.concatenate(([f32(w1)], w[:-1]))).astype(f32)
-    else:
-        w, e = np.empty_like(v), np.empty_like(v)
-        use_k1, use_k2 = k1 != 0.0, section.order == 2 and k2 != 0.0
-        w1, e1 = f32(w1), f32(e1)
-        for n, t in enumerate(f):
-            if use_k1:
-                t = t + k1 * w1
-            if use_k2:
-                t = t + k2 * e1
-            e1 = e1 + t if section.order == 2 else t
-            w1 = w1 + e1
-            w[n], e[n] = w1, e1
-    if v.size:
-        state = (v[-1], d[-1], w[-1], e[-1])
-    return w, e, state
-
-
 def float32_input(design: FloatDesign, u: np.ndarray) -> np.ndarray:
     """float32 cascade input for float32 input u from rest: delay, then the input polynomial by Horner."""
     f32 = np.float32
@@ -195,13 +150,58 @@ def float32_input(design: FloatDesign, u: np.ndarray) -> np.ndarray:
     return acc * u
 
 
+def _float32_coefficients(design: FloatDesign) -> dict:
+    """The sections' float32 coefficients as arrays over the sections, zeros where a form has none."""
+    f32 = np.float32
+    sections = design.sections
+    column = lambda values: np.array(values, dtype=f32)  # noqa: E731
+    return {
+        "taps": np.array([s.taps for s in sections]), "order": np.array([s.order for s in sections]),
+        "b0": column([s.b[0] for s in sections]), "m1": column([s.b[1] for s in sections]),
+        "m2": column([s.b[2] for s in sections]),
+        "c1": column([s.c[0] for s in sections]), "c2": column([s.c[1] if s.order == 2 else 0.0 for s in sections]),
+        "n": [column([s.n[i] if s.order == 2 else 0.0 for s in sections]) for i in range(4)],
+        "g": [column([s.g[i] if s.order == 2 else 0.0 for s in sections]) for i in range(2)],
+    }
+
+
 def float32_reference(design: FloatDesign, u: np.ndarray) -> np.ndarray:
-    """Output (float32) of the generated float filter for float32 input u, from rest."""
-    v = float32_input(design, u)
-    d = (v - _history(v, 1)).astype(np.float32)
-    for section in design.sections:
-        v, d, _ = float32_section(section, v, d)
-    return v
+    """Output (float32) of the generated float filter for float32 input u, from rest.
+
+    The sections run skewed in time (section k on sample t - k at step t), so every step is one
+    float32 operation per section over all sections at once; each element is the same IEEE float32
+    operation as the C's. A term whose coefficient is zero, which the C leaves out, adds an exact
+    zero here.
+    """
+    f32 = np.float32
+    x = float32_input(design, u)
+    count = len(design.sections)
+    if count == 0 or x.size == 0:
+        return x
+    k = _float32_coefficients(design)
+    zero = np.zeros(count, f32)
+    v1, d1, w1, e1, s1, s2 = (zero.copy() for _ in range(6))
+    three, two, one = k["taps"] == 3, k["taps"] == 2, k["taps"] == 1
+    pole2, pole1 = k["order"] == 2, k["order"] == 1
+    steps = x.size + count - 1
+    source = np.concatenate((x, np.zeros(count - 1, f32)))
+    source_d = (source - np.concatenate(([f32(0.0)], source[:-1]))).astype(f32)
+    out = np.empty(x.size, f32)
+    for t in range(steps):
+        v = np.concatenate(([source[t]], w1[:-1]))
+        d = np.concatenate(([source_d[t]], e1[:-1]))
+        f = np.where(three, (k["b0"] * (d - d1) + k["m1"] * v1) + k["m2"] * d1,
+                     np.where(two, k["b0"] * d + k["m1"] * v1, np.where(one, k["b0"] * v, zero)))
+        w2 = (f + k["c1"] * s1) + k["c2"] * s2
+        w_one = w1 + (f + k["c1"] * w1)
+        w = np.where(pole2, w2, np.where(pole1, w_one, f))
+        e = np.where(pole1, f + k["c1"] * w1, w - w1)
+        s1, s2 = (np.where(pole2, s1 + ((k["n"][0] * s1 + k["n"][1] * s2) + k["g"][0] * v), zero),
+                  np.where(pole2, s2 + ((k["n"][2] * s1 + k["n"][3] * s2) + k["g"][1] * v), zero))
+        v1, d1, w1, e1 = v, d, w, e
+        if t >= count - 1:
+            out[t - count + 1] = w[-1]
+    return out
 
 
 def float64_reference(realisation: Realisation, u: np.ndarray, input_polynomial=None) -> np.ndarray:

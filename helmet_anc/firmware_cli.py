@@ -133,6 +133,10 @@ def _controller(parser, args, argv) -> int:
         quantiser=args.quantiser, force=args.force, progress=None if args.quiet else terminal_progress()))
     if isinstance(manifest, int):
         return manifest
+    for key, reason in manifest.data["refused"].items():
+        # One line per variant left out; the variants that meet --min-snr were written.
+        print(f"{parser.prog}: note: {key} variant not generated ({', '.join(manifest.data['variants'])} written): "
+              f"{reason}", file=sys.stderr)
     print(f"worst-case headroom (latency {manifest.data['controller']['latency_samples']} samples):")
     print(format_headroom_table(manifest.data["headroom"]))
     return 0
