@@ -11,7 +11,10 @@ variant adds below full scale:
   (Widrow & Kollar 2008, ch. 5) shaped by N_k(z) = Q(z) / A_k(z) prod_{j>k} H_j(z)
   up to the output, where Q = 1 - z^-1 with error feedback and 1 otherwise, so
   P_r = sum_k q^2/12 (1/pi) int_0^pi |N_k|^2 dw; float32 round-off is modelled as
-  relative noise of variance 2^-48/3 per operation on the section's output power;
+  relative noise of variance 2^-48/3 per operation on the power of the operation's
+  result, shaped by the path from where it enters to the output (:func:`predict_float32`
+  for the generated forms; CMSIS-DSP's DF2T on each section's output power), at the band's
+  worst frequency for the generated forms, since a relative noise follows the signal;
   the Q15 output quantiser adds (2^-15)^2 / 12; SNR_r = 10 log10(0.5 / P_r).
 
 The predicted SNR combines both, 1/snr = 1/snr_c + 1/snr_r (linear ratios).
