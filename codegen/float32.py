@@ -1,38 +1,36 @@
-"""Float32 design of a section cascade: delta-form numerators, two-pole recursions in balanced state space.
+"""Float32 design of a section cascade: two-pole sections as balanced state spaces, the rest around z = 1.
 
 Every node of the cascade (its input, each section's output) carries a sample v and its
 first difference d = v[n] - v[n-1]. Each section computes, in float32 and in exactly this
 order (the generated C, :func:`codegen.reference.float32_reference` and the control path's
-twin share it; terms whose coefficient is exactly zero are left out of all three), first its
-numerator from the input node (v, d), ``1`` marking the previous sample,
+twin share it; terms whose coefficient is exactly zero are left out of all three), from its
+input node (v, d) its output node (w, e), ``1`` marking the previous sample:
 
-    f = (b0 (d0 - d1) + m1 v1) + m2 d1        (three taps; two: f = b0 d0 + m1 v1; one: b0 v0)
-
-then its poles, giving the output node (w, e):
-
-    two poles:  w = (f + c1 s1) + c2 s2;  s_i += ((n_i1 s1 + n_i2 s2) + g_i f) (i = 1, 2, both from
-                the old s);  e = w - w1
+    two poles:  w = (D v0 + c1 s1) + c2 s2;  s_i = s_i + ((n_i1 s1 + n_i2 s2) + g_i v0)
+                (i = 1, 2, both from the old s);  e = w - w1
     one pole:   e = f + k1 w1;  w = w1 + e
     no pole:    w = f;  e = w - w1
 
-The numerator is expanded around z = 1 (the delta operator delta = 1 - z^-1; Middleton &
-Goodwin, "Improved finite word length characteristics in digital control using delta
-operators", IEEE TAC 31(11), 1986): b(z) = b0 delta^2 + m1 z^-1 + m2 z^-1 delta with
-m1 = b(1) = b0 + b1 + b2 and m2 = b0 - b2, so a zero pair near the unit circle close to
-z = 1 is held by the small m1, m2 to float32's relative precision (plain b0, b1, b2 of a zero
-pair 1e-4 from the unit circle near 20 Hz sum to 1e-5 of b0 and their notch moved:
-coefficient SNR 23-27 dB on the designed controllers against 85-120 dB here).
+with the numerator f = (b0 (d0 - d1) + m1 v1) + m2 d1 (three taps; two: b0 d0 + m1 v1; one: b0 v0).
 
-Two poles run 1 / a(z) = 1 + G(z) with G(z) = (-a1 z - a2) / (z^2 + a1 z + a2) in the balanced
-realisation (A, g, c) of G (Moore 1981, :func:`sysid.core.lti.minimal_balanced_realisation`,
-from its normal form [[sigma, -omega], [omega, sigma]] or, for real poles, a chain), stored as
-N = A - I (the delta operator's state matrix: entries of the size of the poles' distance from
-z = 1, kept to relative precision). A direct form's rounding reaches the output through
-1 / a(z), whose noise gain is about 1 / (4 r (r^2 + theta^2)) for poles at distance r from the
-unit circle and angle theta (1e11 at 1e-4: float32 rounding 46 dB below the signal at best);
-the balanced states' rounding reaches it with a gain of order 1 / r (Mullis & Roberts,
-"Synthesis of minimum roundoff noise fixed point digital filters", IEEE TCAS 23(9), 1976).
-One pole keeps the delta form (its noise gain is 1 / (1 - p^2) already).
+A two-pole section b(z) / a(z) is the balanced realisation (A, g, c, D) of the section itself
+(Moore 1981, :func:`sysid.core.lti.minimal_balanced_realisation`, from its normal form
+[[sigma, -omega], [omega, sigma]] or, for real poles, a chain) with N = A - I stored: the delta
+operator's state matrix (Middleton & Goodwin, "Improved finite word length characteristics in
+digital control using delta operators", IEEE TAC 31(11), 1986), whose entries are of the size
+of the poles' distance from z = 1 and keep it to float32's relative precision. A direct form's
+rounding reaches the output through 1 / a(z), whose noise gain is about 1 / (4 r (r^2 + theta^2))
+for poles at distance r from the unit circle and angle theta (1e11 at 1e-4: float32 rounding
+some 46 dB below the signal at best), and its b0, b1, b2 of a zero pair 1e-4 from the unit
+circle near 20 Hz sum to 1e-5 of b0, so their notch moves (coefficient SNR 23-27 dB on the
+designed controllers); the balanced states' rounding reaches the output with a gain of order
+1 / r (Mullis & Roberts, "Synthesis of minimum roundoff noise fixed point digital filters",
+IEEE TCAS 23(9), 1976), and the section's response is held to 83-133 dB there.
+
+The other sections' numerators are expanded around z = 1 (delta = 1 - z^-1):
+b(z) = b0 delta^2 + m1 z^-1 + m2 z^-1 delta with m1 = b(1) = b0 + b1 + b2 and m2 = b0 - b2 (two
+taps: m1 = b0 + b1), so zeros near z = 1 are held by small numbers; one pole is stored as
+k1 = -(1 + a1) (its noise gain 1 / (1 - p^2) needs no more).
 
 Below the steps of firmware generation: a design module (it imports the sections and
 ``sysid.core.lti``) that the generic target's float variant runs.

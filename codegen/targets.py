@@ -24,7 +24,7 @@ become a Target whose ``variants`` reuse ``FIXED_Q15`` and ``FLOAT32`` (or new
 Variants) with its own ``templates``, ``context`` and ``formats``. Registered:
 
 ``generic``  plain C99: Q15 direct-form-I sections with error feedback
-             (:mod:`codegen.fixedpoint`) and float32 delta-form sections
+             (:mod:`codegen.fixedpoint`) and float32 sections written around z = 1
              (:mod:`codegen.float32`); templates ``filter.h.j2``/``filter.c.j2``.
 ``cmsis``    coefficient tables and calls of CMSIS-DSP's biquad kernels
              (:mod:`codegen.cmsis`): the cheapest of its Q15/Q31/32x64 DF1 kernels
@@ -200,7 +200,10 @@ def _generic_formats(plan) -> dict:
     if plan.floating is not None:
         formats["float"] = {
             "input": "float32 full scale", "output": "float32 full scale", "polynomial": plan.floating.polynomial,
-            "sections": [{"order": s.order, "b": list(s.b), "c": list(s.c)} for s in plan.floating.sections]}
+            "form": ("two poles: balanced state space, N = A - I, g = B, c = C, b[0] = D; otherwise the numerator "
+                     "around z = 1 (b0, b(1), b0 - b2) and one pole as k1 = -(1 + a1) (codegen.float32)"),
+            "sections": [{"order": s.order, "taps": s.taps, "b": list(s.b), "c": list(s.c), "n": list(s.n),
+                          "g": list(s.g)} for s in plan.floating.sections]}
     return formats
 
 
