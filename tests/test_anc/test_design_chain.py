@@ -28,6 +28,29 @@ def test_a_controller_at_the_default_latency_generates_firmware(tmp_path, capsys
     assert (tmp_path / "fw_control" / "controller_config.h").is_file()
 
 
+def test_a_variant_below_min_snr_is_left_out_in_one_line(tmp_path, capsys):
+    """--min-snr between the variants' predictions (Q15 98.1 dB everywhere, float32 106.9-144.4 dB): the float32
+    filters are written, the Q15 variant is named in one line with the filter that limits it, and building it
+    stops with that reason; above both, the controller is refused in one line (exit 2) and nothing is written."""
+    path = tmp_path / "controller.json"
+    small_controller().save(path)
+    assert firmware_main(["--controller", str(path), "-o", str(tmp_path / "fw"), "-q", "--min-snr", "100"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line]
+    assert len(notes) == 1 and "q15 variant not generated (float written)" in notes[0]
+    assert "internal model S: q15 variant refused: predicted SNR 98.1 dB" in notes[0]
+    manifest = json.loads((tmp_path / "fw" / "manifest.json").read_text())
+    assert manifest["variants"] == ["float"] and list(manifest["refused"]) == ["q15"]
+    config = (tmp_path / "fw" / "controller_config.h").read_text()
+    assert "#define CTL_HAS_Q15 0" in config and "#define CTL_HAS_F32 1" in config
+    assert '#error "Q15 variant not generated' in config
+    assert "ctl_w_f32_process" in (tmp_path / "fw" / "ctl_w_filter.c").read_text()
+    assert "ctl_w_q15_step" not in (tmp_path / "fw" / "ctl_w_filter.c").read_text()
+    assert firmware_main(["--controller", str(path), "-o", str(tmp_path / "none"), "-q", "--min-snr", "120"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "refused: predicted SNR" in error[0]
+    assert not (tmp_path / "none").exists()
+
+
 @pytest.mark.slow
 def test_the_readme_chain_runs_as_written(tmp_path, capsys, monkeypatch):
     """design (the seed's models, default latency, the default spectrum, the board-fitted default orders) then
