@@ -50,7 +50,8 @@ from sysid.core.board import BOARD_CYCLES_PER_SAMPLE  # noqa: E402
 from sysid.core.plants import appendix_a_model  # noqa: E402
 
 BUDGET = BOARD_CYCLES_PER_SAMPLE / 2
-FORMS = {"q15": "Q31 direct form I, 64-bit accumulator, error feedback", "float": "float32 delta form"}
+FORMS = {"q15": "Q31 direct form I, 64-bit accumulator, error feedback",
+         "float": "two poles: balanced state space, A - I; others around z = 1"}
 
 
 def seed_pair_controller() -> Controller:
