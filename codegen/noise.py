@@ -13,8 +13,9 @@ variant adds below full scale:
   P_r = sum_k q^2/12 (1/pi) int_0^pi |N_k|^2 dw; float32 round-off is modelled as
   relative noise of variance 2^-48/3 per operation on the power of the operation's
   result, shaped by the path from where it enters to the output (:func:`predict_float32`
-  for the generated forms; CMSIS-DSP's DF2T on each section's output power), at the band's
-  worst frequency for the generated forms, since a relative noise follows the signal;
+  for the generated forms, at the band's worst frequency for the loudest sine the filter
+  takes there, since a relative noise follows the signal; CMSIS-DSP's DF2T on each
+  section's output power);
   the Q15 output quantiser adds (2^-15)^2 / 12; SNR_r = 10 log10(0.5 / P_r).
 
 The predicted SNR combines both, 1/snr = 1/snr_c + 1/snr_r (linear ratios).
@@ -138,10 +139,11 @@ def _state_responses(section, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
     """Prediction for the float32 variant of :mod:`codegen.float32`.
 
-    Each float32 operation adds relative noise of variance 2^-48/3 on the power of its result
-    for a full-scale output sine, at every frequency of the band; the worst frequency counts
-    (a relative noise follows the signal, so a low sine through a high gain is where it is
-    largest). A
+    Each float32 operation adds relative noise of variance 2^-48/3 on the power of its result.
+    A relative noise follows the signal, so it is taken at every frequency of the band for the
+    loudest sine the filter takes there (a full-scale input, or the input that drives the output
+    to full scale where the gain exceeds 1), referred to a full-scale output like the fixed
+    point's, and the worst frequency counts. A
     two-pole section (balanced state space): D x and the output sum go straight on, each
     state's increment and accumulation reach the output through c (zI - A)^-1 e_i. Other
     sections: the numerator's operations on f = b(z) x and a one-pole section's on its
@@ -152,8 +154,9 @@ def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
     w, band = _grids(cascade, fs)
     sections = list(cascade.sections)
     realised = [s.realised() for s in design.sections]
-    # A full-scale output sine at each band frequency: the input amplitude 1 / |H| there.
-    amplitude = 1.0 / np.maximum(np.abs(cascade_response(sections, band)), 1e-300)
+    # At each band frequency the loudest sine the filter takes: full scale at the input, or less where the gain
+    # would drive the output beyond full scale (amplitude 1 / |H|); its noise is referred to a full-scale output.
+    amplitude = np.minimum(1.0, 1.0 / np.maximum(np.abs(cascade_response(sections, band)), 1e-300))
     z_band, z = np.exp(1j * band), np.exp(1j * w)
     relative = 2.0**-48 / 3
 

@@ -199,5 +199,7 @@ def format_verification_table(data: dict) -> str:
                      "predicted for the fixed-point")
         lines.append("  variants (absolute round-off at the sweep's level, coefficient error at its worst frequency); "
                      "float32's round-off is relative")
-    lines.append("full-scale sine: the predicted SNR against a full-scale output sine, which --min-snr judges")
+    lines.append("full-scale sine: the predicted SNR against a full-scale output sine, which --min-snr judges (float32: "
+                 "at the band's worst")
+    lines.append("  frequency for the loudest sine the filter takes there, its relative round-off following the signal)")
     return "\n".join(lines)
