@@ -19,9 +19,9 @@
    fixed-pole costs, then its core refitted one sample at a time), and the samples its
    core spent imitating delay move into the delay line (or back out of it) before the
    final refinement when a core behind the new delay validates as well
-   (``sysid.estimation.delay.moved_delay``).
-6. States the data did not ask for leave (``reduction``): poles the final refinement parked at
-   the block's radius bound, states no balanced realisation of the full order holds, and the
+   (``sysid.estimation.delay.moved_delay``); where the pick rang, the scan is run again behind it.
+6. States the data did not ask for leave (``reduction``): a spare pole out of the band, poles the
+   final refinement parked at the block's radius bound, states no balanced realisation of the full order holds, and the
    balanced tail whose Hankel singular values sum to at most 1e-3 of the largest, each kept
    out only when the validation rms stays within its tolerance (the provenance's
    ``refinement.reduced`` says what left).
@@ -398,7 +398,7 @@ def _refine(data: _Behind, spectra: Spectra, grid: GridResult, floor: float, pro
     block, refined = _final_refinement(pick, pick_rms, data)
     # States the data did not ask for out: poles parked at the block's radius bound, states no balanced
     # realisation of the full order holds (sysid.estimation.reduction).
-    validate = lambda c: data.time_rms(c, data.delay)  # noqa: E731
+    validate = lambda c: data.time_rms(c, data.delay)
     refined = without_spare_pole(refined, options.band, block, validate, options.feedthrough)
     reduced = without_degenerate_states(refined.A, refined.B, refined.C, refined.D, refined.rms, block, validate,
                                         options.min_gain, options.feedthrough)

@@ -161,15 +161,15 @@ def _best_trial(pick, candidates, walked, extra, longer, longer_sweeps, delay, v
 
 
 def no_lead(trial, pick) -> bool:
-    """Whether ``trial`` (A, B, C), refitted from ``pick`` (behind a longer delay, or on a longer block), holds its in-band response without imitating a lead:
-    its Hankel norm (largest Hankel singular value, at most its peak gain over the whole unit circle) within
-    MOVED_HANKEL_GROWTH of the pick's.
+    """Whether ``trial`` (A, B, C), refitted from ``pick`` (behind a longer delay, or on a longer block), holds its
+    in-band response without imitating a lead: its Hankel norm (largest Hankel singular value, at most its peak
+    gain over the whole unit circle) within MOVED_HANKEL_GROWTH of the pick's.
 
     The sweeps fix the response in band only. Behind a delay past the true one no causal core holds it; one with
     poles toward z = -1 whose residues cancel in band imitates the lead the delay line asks for, its gain out of
-    the band thousands of times the in-band peak (random helmet 76, short, true delay 62: the pick behind 59 at
-    1.06x, Hankel norm 0.33; moved to 64 at 1.08x, two real poles at -0.85 and -0.87, Hankel norm 1780 and a
-    balanced entry of 11.7).
+    the band thousands of times the in-band peak (random helmet 76, short, true delay 62, the plant's Hankel norm
+    0.34: the pick behind 59 at 1.06x; moved to 64 at 1.08x, two real poles at -0.85 and -0.87, Hankel norm 1780
+    and a balanced entry of 11.7).
     """
     try:
         grown = lti.hankel_singular_values(trial.A, trial.B, trial.C)[0]
