@@ -376,7 +376,10 @@ def _refine(data: _Behind, spectra: Spectra, grid: GridResult, floor: float, pro
     # The lowest order within min_gain of the best validation rms.
     best_rms = min(c.rms for c in candidates)
     pick = next(c for c in candidates if c.rms <= best_rms * (1 + options.min_gain))
-    pick, pick_rms = _settle(pick, data.time_rms(pick, data.delay), scan_block, data)
+    first_rms = data.time_rms(pick, data.delay)
+    # Rang: the simulated sweeps far from their spectra (a pole run toward the unit circle out of the band).
+    rang = first_rms > pick.rms * (1 + options.min_gain)
+    pick, pick_rms = _settle(pick, first_rms, scan_block, data)
     extra = None
     if options.latency:
         trial_options = TrialOptions(options.band, options.validation_band, options.scan_seconds,
@@ -388,9 +391,9 @@ def _refine(data: _Behind, spectra: Spectra, grid: GridResult, floor: float, pro
             pick, pick_rms = moved.pick, moved.rms
             data = dataclasses.replace(data, body=moved.body, sweep_spectra=moved.sweep_spectra,
                                        delay=data.delay + moved.extra)
-            if pick_rms > NEAR_FLOOR * floor:
+            if rang and moved.extra < 0 and pick_rms > NEAR_FLOOR * floor:
                 # Behind a delay read long the scan's cores imitated a lead with poles run to z = -1, ringing in
-                # simulation; refitted from them behind the moved delay they stay far off. The scan again behind it
+                # simulation; refitted from them behind the shorter delay they stay far off. The scan again behind it
                 # (random helmet 41, short: onset 12 for the true 10, the pick 1.03x in the sweeps' spectra and
                 # 4e6x in simulation, 9.9x moved to 8 from its poles; scanned again there, 1.0x).
                 pick, pick_rms, candidates = _scanned_again(pick, pick_rms, candidates, data, spectra, grid, floor)
