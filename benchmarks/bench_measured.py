@@ -9,13 +9,18 @@ least-squares FIR of 256 and 1024 taps; a high-order ARX by least squares; the t
 balanced truncation at our order and the order at which it reaches 1.2 times the floor.
 Then identify's wall time over the measured responses and random helmets together at the
 default cap (median, worst), and for a 600-state model (the HD 600 with its order set to 600).
+Every identify call is timed by the wall clock and by the process's CPU time side by side (the
+machine may be shared: the load average before and after the run is printed with them).
+``--timing-only``: identify's times alone, without the reference estimates (ARX and the true taps'
+truncation take minutes on the HD 600).
 
-Run:  python benchmarks/bench_measured.py [--helmets 20]   (prints a Markdown section)
+Run:  python benchmarks/bench_measured.py [--helmets 20] [--timing-only]   (prints a Markdown section)
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
@@ -113,19 +118,26 @@ class _TrueTruncation:
         return high
 
 
-def _measured(name: str) -> tuple[list[str], float]:
+def _timed_identify(session, options: IdentificationOptions | None = None):
+    """(identify's result on the session's FB path, its wall time, its CPU time: s)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = identify(session.noise, session.sweeps, "fb", options or IdentificationOptions())
+    return result, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _measured(name: str, references: bool = True) -> tuple[list[str], tuple[float, float]]:
     plant = measured_response(name)
     session = measured_session(name, **SESSION)
     sweeps, noise = session.sweeps, session.noise
     spectra = [sweep_spectrum(s) for s in sweeps]
     floor = noise_floor(*sweeps)
-    t0 = time.perf_counter()
-    result = identify(noise, sweeps, "fb", IdentificationOptions())
-    wall = time.perf_counter() - t0
+    result, wall, cpu = _timed_identify(session)
     model, info = result.model, result.model.identification
     ours = rms_from_responses(spectra, [_model_response(model, s.frequencies) for s in spectra]) / floor
     rows = [f"| {name} | ours: {info.get('route')} | {model.order} | {ours:.3f} | "
-            f"{_largest_db(_model_response(model, F_DB), plant.taps, noise.fs):.3f} | {wall:.1f} s |"]
+            f"{_largest_db(_model_response(model, F_DB), plant.taps, noise.fs):.3f} | {wall:.1f} s ({cpu:.1f} s CPU) |"]
+    if not references:
+        return rows, (wall, cpu)
     start = int(round(IdentificationOptions().transient_s * noise.fs))
     for taps in (256, 1024):
         t0 = time.perf_counter()
@@ -145,41 +157,49 @@ def _measured(name: str) -> tuple[list[str], float]:
                 f" | | |")
     rows.append(f"| | true taps' balanced truncation, first order at {AT}x | {needed} | "
                 f"{truth.rms(needed) / floor:.3f} | | {time.perf_counter() - t0:.1f} s |")
-    return rows, wall
+    return rows, (wall, cpu)
+
+
+def _spread(times: list[float]) -> str:
+    return f"median {statistics.median(times):.1f} s, worst {max(times):.1f} s" if times else "none"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--helmets", type=int, default=20)
+    parser.add_argument("--timing-only", action="store_true")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     lines = ["| response | estimate | order | rms / floor | largest error 50 Hz-2 kHz (dB) | wall time |",
              "|---|---|---|---|---|---|"]
-    walls = []
+    measured = []
     for name in NAMES:
-        rows, wall = _measured(name)
+        rows, times = _measured(name, not args.timing_only)
         lines += rows
-        walls.append(wall)
+        measured.append(times)
         print("\n".join(rows), flush=True)
     helmets = []
     for seed in range(args.helmets):
-        session = random_session(seed, **SESSION)
-        t0 = time.perf_counter()
-        result = identify(session.noise, session.sweeps, "fb", IdentificationOptions())
-        helmets.append(time.perf_counter() - t0)
-        print(f"helmet {seed}: {helmets[-1]:.1f} s, order {result.model.order}, "
+        result, wall, cpu = _timed_identify(random_session(seed, **SESSION))
+        helmets.append((wall, cpu))
+        print(f"helmet {seed}: {wall:.1f} s wall, {cpu:.1f} s CPU, order {result.model.order}, "
               f"route {result.model.identification.get('route')}", flush=True)
-    every = walls + helmets
-    session = measured_session("hptf_hd600_left", **SESSION)
-    t0 = time.perf_counter()
-    big = identify(session.noise, session.sweeps, "fb", IdentificationOptions(orders=(600,), max_order=600))
-    big_wall = time.perf_counter() - t0
-    lines += ["", f"identify at the default cap over the {len(walls)} measured responses and {len(helmets)} random "
-                  f"helmets: median {statistics.median(every):.1f} s, worst {max(every):.1f} s "
-                  f"(measured: {', '.join(f'{w:.1f}' for w in walls)} s; helmets median "
-                  f"{statistics.median(helmets) if helmets else float('nan'):.1f} s, worst "
-                  f"{max(helmets) if helmets else float('nan'):.1f} s)",
-              f"identify of a {big.model.order}-state model (HD 600, orders (600,)): {big_wall:.1f} s, "
-              f"{big.model.identification['rms'] / big.noise_floor:.3f}x the floor"]
+    hd600 = measured_session("hptf_hd600_left", **SESSION)
+    big = []
+    for label, options in (("orders (600,), max_order 600", IdentificationOptions(orders=(600,), max_order=600)),
+                           ("max_order 700", IdentificationOptions(max_order=700))):
+        result, wall, cpu = _timed_identify(hd600, options)
+        big.append(f"identify of the HD 600 with {label}: {result.model.order} states, "
+                   f"{result.model.identification['rms'] / result.noise_floor:.3f}x the floor, {wall:.1f} s wall, "
+                   f"{cpu:.1f} s CPU")
+        print(big[-1], flush=True)
+    every = measured + helmets
+    lines += ["", f"identify at the default cap over the {len(measured)} measured responses and {len(helmets)} random "
+                  f"helmets: wall {_spread([w for w, _ in every])}; CPU {_spread([c for _, c in every])} "
+                  f"(measured: {', '.join(f'{w:.1f} / {c:.1f}' for w, c in measured)} s wall / CPU; helmets: wall "
+                  f"{_spread([w for w, _ in helmets])}, CPU {_spread([c for _, c in helmets])})", *big,
+              f"load average (1, 5, 15 min) before the run {', '.join(f'{x:.1f}' for x in load_before)}, after "
+              f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}"]
     print("\n".join(lines))
 
 

@@ -191,7 +191,7 @@ __all__ += ["SEARCH_MAX_ORDER", "SEARCH_SHORT_ORDER", "UNCERTAINTY_MAX_ORDER"]
 # ---------------------------------------------------------------------------------------------------------------------
 __all__ += ["ONSET_COHERENCE", "ONSET_PEAK_FRACTION", "ONSET_NOISE_MULTIPLE", "DELAY_WINDOW", "DELAY_WIDEST",
             "DELAY_TOLERANCE", "DELAY_DIP", "DELAY_REFIT_ITERATIONS", "WALK_SPAN", "WALK_CLEAR", "WALK_STEP",
-            "DELAY_TRIES", "FREED_ORDERS", "SHORTER_BY", "MAX_EXTRA_DELAY"]
+            "DELAY_TRIES", "FREED_ORDERS", "MOVED_HANKEL_GROWTH", "SHORTER_BY", "MAX_EXTRA_DELAY"]
 
 # The onset (``estimate_latency``): the band ends where the 9-bin averaged squared coherence falls to
 # ONSET_COHERENCE; the onset is the first sample above ONSET_PEAK_FRACTION of the peak and ONSET_NOISE_MULTIPLE
@@ -221,6 +221,9 @@ WALK_STEP = 2.0
 # lower orders refitted behind a moved delay (their poles need not imitate it).
 DELAY_TRIES = 3
 FREED_ORDERS = 2
+# A trial behind a longer delay whose Hankel norm (largest Hankel singular value) exceeds the pick's by more than
+# MOVED_HANKEL_GROWTH validates alike only by residues that cancel in band: it imitates a lead (poles toward z = -1).
+MOVED_HANKEL_GROWTH = 10.0
 # ``shorter_delays``, after a data correction's refit: samples the onset may read long (``refine_delay``'s window
 # below the onset), the delays the core is identified anew behind.
 SHORTER_BY = 4

@@ -230,7 +230,7 @@ def _output_error(estimate: LongEstimate, start: LongModel, block: BlockData, it
 
 
 def refine_long(estimate: LongEstimate, order: int, block: BlockData, floor: float, lower: bool = True,
-                at_floor: float = ORDER_AT_FLOOR, min_gain: float = MIN_GAIN) -> LongModel:
+                at_floor: float = ORDER_AT_FLOOR, min_gain: float = MIN_GAIN, polish: bool = True) -> LongModel:
     """The core of ``order`` states (module docstring, step 4), or one of fewer states at the floor.
 
     Up to ``LONG_OE_ORDER`` states, output error from the truncation (``LONG_OE_ITERATIONS`` evaluations of
@@ -241,6 +241,7 @@ def refine_long(estimate: LongEstimate, order: int, block: BlockData, floor: flo
     linear least-squares step on the block), kept where it validates better, when the truncation is above what the
     data allow (the FIR's own validation rms, ``route.enough``: at hundreds of states output error and the
     numerator's refit cost seconds and gain nothing there; the HD 600 at 333 states: 1.09x truncated, 1.25x refined).
+    Not with ``polish`` false: the caller has a model of fewer states at the floor to fall back on.
     """
     best = _truncated(estimate, order)
     tried = {order: best.rms}
@@ -258,7 +259,7 @@ def refine_long(estimate: LongEstimate, order: int, block: BlockData, floor: flo
                 if candidate.rms > limit:
                     break
                 best = candidate
-    elif best.rms > max(at_floor * floor, min(estimate.lengths.values()) * (1 + min_gain)):
+    elif polish and best.rms > max(at_floor * floor, min(estimate.lengths.values()) * (1 + min_gain)):
         # Above what the data allow (a cap below the floor's order): the numerator refitted on the raw data.
         polished = _output_error(estimate, best, block, 1)
         tried[order] = min(tried[order], polished.rms)

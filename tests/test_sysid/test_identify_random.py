@@ -75,7 +75,27 @@ def test_random_helmet_out_of_a_local_minimum_reaches_the_floor(seed):
     assert failure is None, failure
 
 
+# Seeds whose delay was read past the true one, where a core imitates the lead (41: the pick rang in simulation,
+# 9.9x moved back from its poles, the scan again behind the shorter delay; 76: a moved core with poles at -0.85 and
+# -0.87, Hankel norm 1780, balanced entry 11.7). 10-20 s of CPU each, so slow-marked.
+DELAY_PAST_SEEDS = (41, 76)
+
+
 @pytest.mark.slow
-def test_hundred_random_helmets_at_least_95_percent_reach_the_floor():
+@pytest.mark.parametrize("seed", DELAY_PAST_SEEDS)
+def test_random_helmet_behind_a_delay_read_past_its_own_reaches_the_floor(seed):
+    failure = _failure(seed)
+    assert failure is None, failure
+
+
+# 97 of 100 at cee2f29 (402 s of CPU in all). Seeds 57, 77 and 78 miss by their delay alone, 3 to 4 samples off at
+# 1.03-1.11x the floor: 57 and 77 start smoothly
+# (two roll-offs at 2.3-5.7 kHz, the onset's lag fs / (2 pi f_c) samples each, read long on 57 and short on 77); 78's
+# 12-state pick refits 0.1 % lower (9 noise variances) one to three samples short of its pure delay, where its spare
+# poles imitate the missing samples. 41 (a delay read 2 long: the pick rang in simulation, the scan again behind the
+# moved delay reaches 1.0x) and 76 (a core behind 2 samples too many imitating the lead: Hankel norm 1780, balanced
+# entry 11.7) are identify's own fixes (sysid.identify, sysid.estimation.delay.trials).
+@pytest.mark.slow
+def test_hundred_random_helmets_at_least_97_percent_reach_the_floor():
     failures = [f for f in map(_failure, SLOW_SEEDS) if f is not None]
-    assert len(failures) <= 5, "; ".join(failures)
+    assert len(failures) <= 3, "; ".join(failures)

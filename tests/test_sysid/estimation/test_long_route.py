@@ -48,3 +48,32 @@ def test_the_estimate_holds_the_hrir_and_its_ladder_reaches_the_floor(fabian):
     assert estimate.delay.taps <= 11 and estimate.line == max(estimate.delay.taps - 1, 0)
     n = estimate.curve.lowest_at_floor()
     assert estimate.curve.ratio(n) < 1.2
+
+
+def test_above_the_output_error_order_the_numerator_is_refitted_only_where_asked(fabian, monkeypatch):
+    # Above LONG_OE_ORDER a truncation above what the data allow gets its numerator refitted (one linear step on the
+    # block); long_model asks for none above the floor's order, which it falls back on (HD 600, orders (600,): 473
+    # states, that step 42 of the call's 74 s for a model it dropped).
+    import dataclasses
+
+    from sysid.estimation import long_route
+    from sysid.estimation.output_error import block_data
+
+    session, _, floor = fabian
+    options = IdentificationOptions()
+    estimate = long_estimate(session.noise, session.sweeps, floor, options.band, options.validation_band,
+                             options.transient_s, options.max_delay)
+    # The HRIR's truncation holds 40 states: the bound lowered below them, as the HD 600's 473 are above it.
+    monkeypatch.setattr(long_route, "LONG_OE_ORDER", 20)
+    order = 30
+    assert estimate.truncation.max_order >= order > long_route.LONG_OE_ORDER
+    # A floor far below this session's: every truncation is above what the data allow.
+    estimate = dataclasses.replace(estimate, lengths={n: 1e-3 * floor for n in estimate.lengths})
+    block = block_data(session.noise.trimmed(options.transient_s), options.band, 1.0)
+    refits = []
+    refine = long_route.refine_output_error
+    monkeypatch.setattr(long_route, "refine_output_error", lambda *a, **k: refits.append(k) or refine(*a, **k))
+    held = long_route.refine_long(estimate, order, block, 1e-3 * floor, polish=False)
+    assert not refits and held.refinement == "truncation" and held.order == order
+    long_route.refine_long(estimate, order, block, 1e-3 * floor)
+    assert [k["max_iterations"] for k in refits] == [1]

@@ -7,7 +7,8 @@ import pytest
 
 from sysid.core import lti
 from sysid.estimation.output_error import block_data, decay_bound, radius_bound_mask
-from sysid.estimation.reduction import is_balanced, truncation_orders, without_degenerate_states
+from sysid.estimation.reduction import (Reduced, is_balanced, truncation_orders, without_degenerate_states,
+                                       without_spare_pole)
 from sysid.io.recordings import Recording
 
 FS = 8000.0
@@ -136,3 +137,38 @@ def test_a_truncation_the_validation_rejects_is_not_kept(session):
     reduced = without_degenerate_states(*model, 1e-3, block, validate, min_gain=0.03)
     assert reduced.A.shape == (6, 6) and reduced.removed == "" and len(calls) >= 1
     np.testing.assert_array_equal(reduced.A, model[0])
+
+
+def _with_real_pole(plant, pole, residue):
+    """The plant beside a real pole ``pole`` whose residue is ``residue``, balanced."""
+    A = np.zeros((5, 5))
+    A[:4, :4], A[4, 4] = plant[0], pole
+    return lti.balanced_realisation(A, np.vstack([plant[1], [[residue]]]), np.hstack([plant[2], [[1.0]]]), plant[3])
+
+
+def test_a_spare_pole_out_of_the_band_is_dropped_and_the_rest_refitted(session):
+    plant, block, validate, calls = session
+    # A pole at z = -0.995 (4 kHz, out of the 20 Hz-3 kHz band): its state the largest in the balanced model.
+    model = _with_real_pole(plant, -0.995, 0.05)
+    assert lti.hankel_singular_values(*model[:3])[0] > 2 * lti.hankel_singular_values(*plant[:3])[0]
+    rms = validate(SimpleNamespace(A=model[0], B=model[1], C=model[2], D=model[3]))
+    calls.clear()
+    reduced = without_spare_pole(Reduced(*model, rms), BAND, block, validate)
+    assert reduced.A.shape == (4, 4) and reduced.removed == "an out-of-band pole dropped"
+    assert len(calls) == 1 and reduced.rms <= rms
+    h_true, h = lti.frequency_response(*plant, Z), lti.frequency_response(reduced.A, reduced.B, reduced.C, reduced.D, Z)
+    assert np.max(np.abs(h - h_true)) < 0.02 * np.max(np.abs(h_true))
+
+
+def test_an_out_of_band_pole_the_validation_needs_is_kept(session):
+    plant, block, _, _ = session
+    model = _with_real_pole(plant, -0.995, 5e-3)
+    # A validation that sees the pole: the refit without it validates 10 % worse.
+    calls = []
+
+    def validate(candidate):
+        calls.append(candidate)
+        return 1.1e-3
+
+    given = Reduced(*model, 1e-3)
+    assert without_spare_pole(given, BAND, block, validate) is given and len(calls) == 1
