@@ -150,8 +150,10 @@ def render(snr: dict, generated: dict, cmsis: dict, cmsis_target: dict, sizes: d
               "stored, and its coefficients come from one table. A one-sample call still pays for the state "
               "traffic of every section and the call itself, so the control path should budget the one-sample "
               "figures (\"Board control loop\" counts step), not the block figures.",
-              f"- float32: worst sweep {worst_float:.1f} dB (target 75 dB); the delta-form feedback coefficients "
-              "(c1 = -a1 - 2, c2 = 1 - a2) keep float32's relative precision on the poles' distance from z = 1.",
+              f"- float32: worst sweep {worst_float:.1f} dB (target 75 dB); two-pole sections run as balanced state "
+              "spaces in the delta operator (N = A - I stored) and the other numerators are written around z = 1 "
+              "(b(1), b0 - b2), so float32 keeps its relative precision on the poles' and zeros' distance from "
+              "z = 1 (`codegen.float32`).",
               "- CMSIS-DSP on this generator's sections against CMSIS-DSP on zpk2sos sections: the float32 DF2T kernel "
               "does about as well on both; the plain q31 DF1 kernel does worse on the FB sections of this generator. "
               "CMSIS's Q31 kernels wrap instead of saturating, so `--target cmsis` scales every stage in the worst-case "
