@@ -4,7 +4,7 @@ Order of the steps: (1) the uncertainty of S_model (``anc.uncertainty``); (2) th
 feedback filter Q and its bound (``anc.feedback.design_feedback``: the best Q of a rich family
 under the amplification limit per band and r95 |G Q| <= 0.5, then balanced truncation);
 (3) the feed-forward filter W for what the feedback leaves of the chin-coherent noise
-(``anc.feedforward.design_feedforward``: Kautz basis with poles from the paths, the band rule,
+(``anc.feedforward.design_feedforward``: Kautz bases with poles from the paths and the loop, the band rule,
 balanced truncation); (4) the limits the paths allow for this noise at this latency
 (``anc.limits.feedforward_limits``: causal Wiener feed-forward bound, coherence bound, what limits
 each band) beside the feedback bound; (5) predictions per band (``anc.prediction``) for W alone, Q
@@ -205,6 +205,17 @@ def board_cost(*orders: int) -> int:
     return int(round(PATH_INSTRUCTIONS + sum(board.board_cost(n).step for n in orders if int(n) > 0)))
 
 
+def _loop_poles(fb_model: Model, fb: StateSpaceFilter | None, latency: int) -> np.ndarray | None:
+    """The poles of G Q = z^-L S_model Q without S's delay (S's, Q's, the latency's), those of the target
+    (1 + G Q) H that W cancels (``anc.feedforward_fit.path_poles``; S's delay as poles at the origin cost
+    more under the board's cap than they hold); None without Q."""
+    if fb is None:
+        return None
+    return np.concatenate([fb_model.poles() if fb_model.order else np.zeros(0, complex),
+                           np.linalg.eigvals(fb.A) if fb.order else np.zeros(0, complex),
+                           np.zeros(int(latency))])
+
+
 def _margins(margins: dict, loop: np.ndarray) -> dict:
     """The loop's margins with the phase margin None where |Lg| never crosses 1 ("no crossover")."""
     Lg = -loop / (1.0 + loop)
@@ -293,7 +304,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     if options.feedforward and disturbance.has_reference:
         t0 = time.process_time()
         ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty, feedback_loop=loop_fn,
-                                       ff_model=ff_model, max_gain_db=options.max_ff_gain_db, **order_budget)
+                                       ff_model=ff_model, max_gain_db=options.max_ff_gain_db,
+                                       loop_poles=_loop_poles(fb_model, fb, options.latency), **order_budget)
         if options.max_order is None and options.fit_board:
             q_order = 0 if fb is None else fb.order
             q_fits, w_fits = board_orders(fb_model.order, q_order, ff_design.filter.order)
@@ -308,7 +320,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             if w_fits < ff_design.filter.order or q_fits < q_order:
                 ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty,
                                                feedback_loop=loop_fn, ff_model=ff_model,
-                                               max_gain_db=options.max_ff_gain_db, max_order=w_fits)
+                                               max_gain_db=options.max_ff_gain_db, max_order=w_fits,
+                                               loop_poles=_loop_poles(fb_model, fb, options.latency))
         timing["feedforward"] = time.process_time() - t0
         ff = ff_design.filter
         truncation["ff"] = {"order": int(ff_design.order), "full_order": int(ff_design.full_order),

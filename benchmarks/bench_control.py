@@ -26,10 +26,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from control_cases import (JUDGED, identified, judge, random_pair, recording_with_anc_off,  # noqa: E402
-                           road_noise, seed_pair)
+from control_cases import (JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pair,  # noqa: E402
+                           recording_with_anc_off, road_noise, seed_pair)
 
 from anc import design  # noqa: E402
+from anc.design import board_cost  # noqa: E402
 from anc.disturbance import from_recording  # noqa: E402
 from anc.fxlms import run_to_convergence  # noqa: E402
 from sysid.core.errors import HelmetAncError  # noqa: E402
@@ -42,13 +43,15 @@ def _mean(values) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--pairs", default="seed,3,11", help="comma-separated: seed and random FB seeds")
+    parser.add_argument("--pairs", default=",".join(["seed", *map(str, RANDOM_FB_SEEDS)]),
+                        help="comma-separated: seed and random FB seeds")
     parser.add_argument("--fxlms-seconds", type=float, default=8.0)
     args = parser.parse_args()
     wall, cpu = time.perf_counter(), time.process_time()
     print("| pair | causal ff bound | coherence bound | robust fb bound | ours ff | ours fb | ours both | "
-          "FxLMS converged (time, step / bound) | W order (of) | Q order (of) | design CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "FxLMS converged (time, step / bound) | W order (of) | Q order (of) | design CPU s | board instructions "
+          "per sample |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for key in args.pairs.split(","):
         name = "seed" if key == "seed" else f"random {int(key)}"
         pair = seed_pair() if key == "seed" else random_pair(int(key))
@@ -58,7 +61,7 @@ def main() -> None:
         try:
             controller = design(s_id, p_id, disturbance)
         except HelmetAncError as exc:
-            print(f"| {pair.name} | refused: {exc} |||||||||| ")
+            print(f"| {pair.name} | refused: {exc} ||||||||||| ")
             continue
         seconds = time.process_time() - started
         judged = judge(controller, pair)
@@ -73,7 +76,8 @@ def main() -> None:
         print(f"| {pair.name} | {_mean(limits.get('causal_ff_db')):.1f} | {_mean(limits.get('coherence_db')):.1f} | "
               f"{_mean(limits.get('feedback_db')):.1f} | "
               + " | ".join(f"{judged.mean(p):.1f}" if p in judged.per_band else "-" for p in ("ff", "fb", "both"))
-              + f" | {fx_text} | {orders[0]} | {orders[1]} | {seconds:.0f} |")
+              + f" | {fx_text} | {orders[0]} | {orders[1]} | {seconds:.0f} | "
+              f"{board_cost(s_id.order, *(f.order for f in (controller.fb, controller.ff) if f is not None))} |")
         sys.stdout.flush()
     print(f"\ntotal: {time.perf_counter() - wall:.0f} s wall, {time.process_time() - cpu:.0f} s CPU")
 
