@@ -38,7 +38,7 @@ from sysid.estimation.input_nonlinearity import drive_limit
 
 from .controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
 from .disturbance import Disturbance, default_disturbance
-from .feedback import ROBUSTNESS_BOUND, design_feedback
+from .feedback import ROBUSTNESS_BOUND, design_feedback, loop_margins
 from .feedforward import BAND_TOLERANCE_DB, design_feedforward
 from .limits import feedforward_limits
 from .prediction import (band_attenuation, band_centres, band_grid, coherence_bound, drive_psd, ear_psd,
@@ -46,7 +46,7 @@ from .prediction import (band_attenuation, band_centres, band_grid, coherence_bo
 from .uncertainty import Uncertainty, model_uncertainty
 
 __all__ = ["DesignOptions", "design", "predict", "band_limits", "board_cost", "UNDAMPED_MARGIN", "undamped_pole",
-           "WEAK_DRIVE_DB", "BOARD_CYCLES_PER_SAMPLE", "INSTRUCTIONS_PER_SECTION", "PATH_INSTRUCTIONS"]
+           "WEAK_DRIVE_DB", "scaled_filter", "BOARD_CYCLES_PER_SAMPLE", "INSTRUCTIONS_PER_SECTION", "PATH_INSTRUCTIONS"]
 
 # An FB model pole closer than this to the unit circle (a mode decaying by 1/e in over 1e6 samples,
 # 20 s at 48 kHz), other than a real pole at DC (Q's double zero), is refused: no acoustic path rings that long (the seed's FB path's slowest pole is
@@ -77,7 +77,8 @@ class DesignOptions:
     path, ``BOARD_LATENCY_SAMPLES``); ``max_amplification_db``: Q's amplification limit per band (dB);
     ``max_ff_gain_db``: W's gain bound outside the bands (dB); ``max_order``: the largest order of each
     filter (None: the order the design needs, cut to what the board affords when ``fit_board``: see
-    ``board_orders``)."""
+    ``board_orders``); ``drive_limit``: Q and W scaled so the drive's peaks stay within the FB model's
+    drive limit (``drive_level``; a linear model has none)."""
 
     latency: int = BOARD_LATENCY_SAMPLES
     max_amplification_db: float = 6.0
@@ -86,6 +87,7 @@ class DesignOptions:
     feedforward: bool = True
     max_order: int | None = None
     fit_board: bool = True
+    drive_limit: bool = True
 
 
 def undamped_pole(model: Model) -> tuple[float, float] | None:
@@ -178,6 +180,44 @@ def drive_level(s_model: Model, disturbance: Disturbance, fb: StateSpaceFilter |
     peak = DRIVE_CREST_FACTOR * rms
     scale = 1.0 if limit is None or peak <= limit else limit / peak
     return {"rms_fs": rms, "peak_fs": peak, "limit_fs": limit, "scale": scale}
+
+
+def scaled_filter(filt: StateSpaceFilter, scale: float) -> StateSpaceFilter:
+    """The filter times ``scale`` (its output map and feed-through)."""
+    return StateSpaceFilter(filt.A, filt.B, scale * filt.C, scale * filt.D)
+
+
+def _within_drive_limit(scale: float, fb: StateSpaceFilter | None, ff: StateSpaceFilter | None, margins: dict,
+                        fb_design) -> tuple:
+    """Q and W times ``scale`` < 1, with the loop's margins of the scaled Q.
+
+    The ear's response to the noise is affine in a common factor a on Q and W (e = a e_designed + (1 - a) e_off,
+    the internal model taken exact), so every band lies between the design's level and no control's; robust
+    stability holds a fortiori, the uncertainty disc r95 |G a Q| <= 0.5 shrinking with a."""
+    fb = None if fb is None else scaled_filter(fb, scale)
+    ff = None if ff is None else scaled_filter(ff, scale)
+    if fb_design is not None:
+        loop = scale * fb_design.loop
+        margins = dict(fb_design.margins)
+        margins.update(loop_margins(loop, fb_design.frequencies_hz, fb_design.relative_95, loop))
+        if "robustness_factor_dense" in margins:
+            margins["robustness_factor_dense"] /= scale
+        margins = _margins(margins, loop)
+    return fb, ff, margins
+
+
+def _drive_note(drive: dict) -> str:
+    """The controller's note on the drive against the FB model's drive limit."""
+    text = (f"drive: {drive['rms_fs']:.3g} FS rms, peaks about {drive['peak_fs']:.3g} FS, against the FB model's "
+            f"drive limit {drive['limit_fs']:.3g} FS (its input nonlinearity's harmonics at -20 dB)")
+    if "applied_scale" in drive:
+        return (text + f": Q and W scaled by {drive['applied_scale']:.3g} so the driver does not distort at this "
+                "noise level (each band between the full design's level and no control's; --ignore-drive-limit "
+                "keeps the full filters)")
+    if drive["scale"] < 1.0:
+        return (text + f": the driver would distort at this noise level; Q and W scaled by {drive['scale']:.3g} "
+                "would keep it within, each band then between the controller's and no control's level")
+    return text
 
 
 def board_orders(s_order: int, q_order: int, w_order: int) -> tuple[int, int]:
@@ -338,13 +378,11 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
                  + ("" if fits else ": it does NOT fit; design again with DesignOptions(max_order=...) for the "
                     "order that fits, at the attenuation that costs"))
     drive = drive_level(fb_model, disturbance, fb, ff)
+    if drive["scale"] < 1.0 and options.drive_limit:
+        fb, ff, margins = _within_drive_limit(drive["scale"], fb, ff, margins, fb_design if fb is not None else None)
+        drive = dict(drive_level(fb_model, disturbance, fb, ff), applied_scale=drive["scale"])
     if drive["limit_fs"] is not None:
-        notes.append(f"drive: {drive['rms_fs']:.3g} FS rms, peaks about {drive['peak_fs']:.3g} FS, against the FB "
-                     f"model's drive limit {drive['limit_fs']:.3g} FS (its input nonlinearity's harmonics at -20 dB)"
-                     + ("" if drive["scale"] >= 1.0 else
-                        f": the driver would distort at this noise level; Q and W scaled by {drive['scale']:.3g} "
-                        "would keep it within, each band then between the controller's and no control's level "
-                        "(|1 + a G Q| is convex in a)"))
+        notes.append(_drive_note(drive))
     predicted, overall, coherence = predict(fb_model, disturbance, options.latency, fb, ff)
     limits = band_limits(band_centres(), ff_limits, fb_bound)
     info = {

@@ -47,6 +47,9 @@ def register(commands) -> None:
     parser.add_argument("--max-order", metavar="N",
                         help="largest order (states) of Q and of W; default: the orders the design needs, cut to "
                              "what the board's 1750 cycles per sample afford")
+    parser.add_argument("--ignore-drive-limit", action="store_true",
+                        help="keep Q and W at full scale even where the drive's peaks exceed the FB model's drive "
+                             "limit (its input nonlinearity's harmonics at -20 dB); by default they are scaled to it")
     parser.add_argument("--report", metavar="FILE.html", help="also write the control page (figures, margins)")
     parser.add_argument("-o", "--output", required=True, metavar="controller.json")
     add_force_option(parser)
@@ -167,7 +170,9 @@ def run(args) -> int:
     else:
         disturbance = default_disturbance(fb.fs, ff)
     provenance = {"fb_model": str(args.fb), "ff_model": args.ff, "disturbance_file": args.disturbance}
-    controller = design(fb, ff, disturbance, DesignOptions(latency=args.latency, max_order=parse_max_order(args.max_order)), provenance=provenance)
+    options = DesignOptions(latency=args.latency, max_order=parse_max_order(args.max_order),
+                            drive_limit=not args.ignore_drive_limit)
+    controller = design(fb, ff, disturbance, options, provenance=provenance)
     controller.save(output)
     if report is not None:
         from report.control_figures import control_page

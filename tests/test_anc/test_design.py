@@ -234,3 +234,32 @@ def test_the_drive_is_judged_against_the_fb_models_drive_limit():
     judged = drive_level(saturating, disturbance, q, None)
     assert 0 < judged["limit_fs"] < judged["peak_fs"] == pytest.approx(DRIVE_CREST_FACTOR * linear["rms_fs"])
     assert judged["scale"] == pytest.approx(judged["limit_fs"] / judged["peak_fs"])
+
+
+def test_a_saturating_driver_gets_q_scaled_to_its_drive_limit():
+    """A tanh driver far below the drive the design asks: Q is scaled so the drive's peaks sit at the FB model's
+    drive limit, the margins are those of the scaled loop, every band lies between the full filter's attenuation
+    and none, and the note says so."""
+    import dataclasses
+
+    from anc.design import DesignOptions, drive_level, predict, scaled_filter
+    from anc.disturbance import default_disturbance
+
+    s_model = appendix_a_model("fb")
+    saturating = dataclasses.replace(s_model, input_nonlinearity_form={"kind": "tanh", "scale": 1e-5, "gain": 1.0,
+                                                                       "offset": 0.0})
+    disturbance = default_disturbance(s_model.fs, None)
+    options = DesignOptions(feedforward=False, max_order=6)
+    limited = design(saturating, None, disturbance, options)
+    drive = limited.provenance["drive"]
+    assert 0 < drive["applied_scale"] < 0.5
+    assert drive["peak_fs"] == pytest.approx(drive["limit_fs"], rel=1e-6)
+    full = scaled_filter(limited.fb, 1.0 / drive["applied_scale"])
+    assert drive_level(saturating, disturbance, full, None)["scale"] == pytest.approx(drive["applied_scale"], rel=1e-6)
+    full_db = np.array(predict(s_model, disturbance, options.latency, full, None)[0]["fb"])
+    limited_db = np.array(limited.predicted_attenuation_db["fb"])
+    assert np.all(limited_db >= np.minimum(full_db, 0.0) - 1e-6)
+    assert np.all(limited_db <= np.maximum(full_db, 0.0) + 1e-6)
+    # The uncertainty disc r95 |G Q| <= 0.5 shrinks with the scale: the design's factor (at least about 1) over it.
+    assert limited.margins["robustness_factor"] >= 0.95 / drive["applied_scale"]
+    assert any(n.startswith("drive:") and "scaled by" in n and "--ignore-drive-limit" in n for n in limited.notes)
