@@ -12,7 +12,9 @@ detected by regressing the sweep residual on u^2, u^3 through the model's linear
 misfit it must not mistake for harmonics), the harmonics also measured on exponential
 sweeps (Farina); refined by a Hammerstein input map fitted together with the core
 (``sysid.refits.add_input_nonlinearity``: a polynomial of degree up to ``degree`` chosen by
-description length, or a tanh saturation, whichever validates better).
+description length, or a tanh saturation, whichever validates better; behind a high-pass whose
+corner is fitted with them where the static map leaves the model above the floor:
+``sysid.estimation.wiener_hammerstein``).
 """
 
 from __future__ import annotations
