@@ -1,18 +1,20 @@
 """Benchmark of nonlinear drivers in the self-identified workflow: identify, diagnose, refine --auto.
 
-Per shape (a tanh saturation, symmetric; an asymmetric polynomial u + a2 u^2) and level (the
-third, resp. second, harmonic at the sweeps' amplitude: -15, -22, -30 dB) on a few random helmets
+Per shape (a tanh saturation, symmetric; an asymmetric polynomial u + a2 u^2; that polynomial behind a
+first-order coupling high-pass at 2 or 20 Hz, a Wiener-Hammerstein driver: ``hp2``, ``hp20``) and level
+(the third, resp. second, harmonic at the sweeps' amplitude: -15, -22, -30 dB) on a few random helmets
 (``sysid.random_plant``, short sessions), as a user works: the model identified on the session,
 diagnosed (is input-nonlinearity among the top two significant findings?), refined by
 ``refine --auto``. Reported: rms / noise floor after identification and after refinement, the
 harmonic levels at the sweeps' amplitude (true; measured on the sweeps by Farina's separation; the
-refined model's), the core's order against the true plant's, the refined shape, the drive limit
+refined model's), the core's order against the true plant's, the refined shape (with the pre-filter's corner found), the drive limit
 and the time of diagnose + refine --auto. Also how far the noise recording's input reaches
 beyond the sweeps' amplitude (its peak, and the share of its samples above the sweep amplitude):
 the noise recording must excite the nonlinearity at the sweeps' level for the fit to see it.
 Prints Markdown.
 
-    python benchmarks/bench_nonlinear.py [--seeds 11,12] [--paths fb,ff] [--levels -15,-22,-30] [--shapes tanh,poly]
+    python benchmarks/bench_nonlinear.py [--seeds 11,12] [--paths fb,ff] [--levels -15,-22,-30]
+        [--shapes tanh,poly,hp2,hp20]
 """
 
 from __future__ import annotations
@@ -38,7 +40,17 @@ def effect(shape: str, level: float, reference: float = 1.0) -> str:
     if shape == "tanh":
         return f"input-nonlinearity:h3_db={level},h2_db=-120,tanh=1"
     # simulate states a polynomial's levels at the session's largest input: moved to the sweeps' amplitude.
-    return f"input-nonlinearity:h2_db={level + 20 * np.log10(reference):.2f},h3_db=-120"
+    prefilter = f",prefilter_hz={shape[2:]}" if shape.startswith("hp") else ""
+    return f"input-nonlinearity:h2_db={level + 20 * np.log10(reference):.2f},h3_db=-120{prefilter}"
+
+
+def _form(model: Model) -> str:
+    """The refined map in words: tanh or the polynomial's degree, and the pre-filter's order and corner."""
+    form = model.input_nonlinearity_form or {}
+    words = "tanh" if form.get("kind") == "tanh" else (
+        f"poly {len(model.input_nonlinearity)}" if model.input_nonlinearity else "none")
+    prefilter = form.get("prefilter")
+    return words + (f" behind hp{prefilter['order']} {prefilter['corner_hz']:.1f} Hz" if prefilter else "")
 
 
 def run(seed: int, path: str, shape: str, level: float) -> dict:
@@ -60,12 +72,11 @@ def run(seed: int, path: str, shape: str, level: float) -> dict:
         "seed": seed, "path": path, "shape": shape, "level": level,
         "named": any(f["effect"] == "input-nonlinearity" for f in findings.significant[:2]),
         "identified": findings.comparison.ratio, "refined": auto.after.ratio,
-        "true_h": harmonic_levels(true.apply_input_nonlinearity, sweep_amplitude)[k],
+        "true_h": harmonic_levels(true.static_input_nonlinearity, sweep_amplitude)[k],
         "measured_h": measured.levels_db[k] if measured else float("nan"),
-        "model_h": harmonic_levels(refined.apply_input_nonlinearity, sweep_amplitude)[k],
+        "model_h": harmonic_levels(refined.static_input_nonlinearity, sweep_amplitude)[k],
         "order": refined.order, "true_order": true.order, "identified_order": model.order,
-        "form": "tanh" if refined.input_nonlinearity_form else (
-            f"poly {len(refined.input_nonlinearity)}" if refined.input_nonlinearity else "none"),
+        "form": _form(refined),
         "drive_limit": refined.identification.get("drive_limit_fs"),
         "noise_peak_db": 20 * np.log10(np.max(np.abs(body)) / sweep_amplitude),
         "noise_above": float(np.mean(np.abs(body) > sweep_amplitude)),
@@ -79,7 +90,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", default="11,12")
     parser.add_argument("--paths", default="fb,ff")
     parser.add_argument("--levels", default="-15,-22,-30")
-    parser.add_argument("--shapes", default="tanh,poly")
+    parser.add_argument("--shapes", default="tanh,poly,hp2,hp20")
     args = parser.parse_args(argv)
     print("| shape | H dB | helmet | named | rms/floor identified -> refined | H true / sweeps / model (dB) "
           "| order (identified -> refined / true) | refined map | drive limit FS | noise input: peak re sweep (dB), share "

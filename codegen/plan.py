@@ -97,7 +97,7 @@ class Plan:
             "model": {**self.provenance, "fs": self.model.fs, "delay": self.model.delay,
                       "stable": self.model.stable, "spectral_radius": self.model.spectral_radius,
                       "input_nonlinearity": self.model.input_nonlinearity,
-                      # A saturation form is not generated: the drive passes it before the filter's input.
+                      # A saturation form and its pre-filter are not generated: the drive passes them first.
                       **({"input_nonlinearity_form": {**self.model.input_nonlinearity_form,
                                                       "generated": "no: outside the generated linear filter"}}
                          if self.model.input_nonlinearity_form else {})},

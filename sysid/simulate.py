@@ -159,6 +159,15 @@ def simulate_session(spec: SessionSpec | None = None, plant: Model | FirPlant | 
             plant = replace(plant, input_nonlinearity=records["input-nonlinearity"]["coefficients"])
         else:
             plant.input_nonlinearity = records["input-nonlinearity"]["coefficients"]
+    if hidden.get("input-nonlinearity", {}).get("prefilter_hz"):
+        # A Wiener-Hammerstein driver: a coupling high-pass in front of the part that distorts
+        # (sysid.core.model: the form's prefilter), the form an identity when the map is a polynomial.
+        if isinstance(plant, FirPlant):
+            raise HelmetAncError("--effect input-nonlinearity with prefilter_hz needs a state-space plant")
+        p = hidden["input-nonlinearity"]
+        prefilter = {"kind": "highpass", "order": int(p["prefilter_order"]), "corner_hz": float(p["prefilter_hz"])}
+        plant.input_nonlinearity_form = {**(plant.input_nonlinearity_form or {"kind": "identity"}), "prefilter": prefilter}
+        records["input-nonlinearity"]["prefilter"] = prefilter
 
     lengths = [noise_in.size, sweep_in.size, sweep_in.size]
     timeline = np.cumsum([0] + lengths)
@@ -225,7 +234,7 @@ def _parse_effects(effects, fs: float) -> dict[str, dict]:
         parsed = effect if isinstance(effect, EffectSpec) else parse_effect(effect, SIMULATED_EFFECTS)
         if parsed.kind in hidden:
             raise HelmetAncError(f"--effect {parsed.kind} given twice")
-        for name in ("f0_hz", "corner_hz", "frequency_hz"):
+        for name in ("f0_hz", "corner_hz", "frequency_hz", "prefilter_hz"):
             if name in parsed.params and parsed.params[name] >= fs / 2:
                 raise HelmetAncError(f"--effect {parsed.kind}: {name} must be below fs/2 = {fs / 2:g} Hz")
         hidden[parsed.kind] = dict(parsed.params)

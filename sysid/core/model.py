@@ -34,6 +34,11 @@ units; absent = none; ``offset`` defaults to 0, ``gain`` to 1) the saturation
 a soft clipper that saturates at g s (1 -+ tanh(o / s)) and whose offset o makes it asymmetric
 (an even part: a second harmonic); w(0) = 0 and its small-signal gain is g / cosh^2(o / s). A
 model without the field is simulated, saved and compared exactly as before it existed.
+``{"kind": "identity"}`` is w = u (a polynomial alone behind a pre-filter). The form's optional
+``"prefilter": {"kind": "highpass" | "lowpass", "order": 1 | 2, "corner_hz": f}`` is a linear block
+in front of the static map (a Wiener-Hammerstein model: u -> prefilter -> form -> polynomial -> core),
+the factor of ``sysid.core.structures.factor_coefficients`` (unit pass-band gain; f in Hz below fs/2):
+a driver's coupling capacitor or a DC-blocking stage ahead of the part that distorts.
 """
 
 from __future__ import annotations
@@ -45,9 +50,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.signal
 
 from . import lti
 from .errors import ModelError
+from .structures import factor_coefficients, factor_response
 from .files import atomic_write, atomic_write_text
 
 __all__ = ["Model", "MODEL_FORMAT", "PATHS", "atomic_write_text"]
@@ -95,16 +102,35 @@ def _matrix(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     return array
 
 
-FORM_KINDS = ("tanh",)
+FORM_KINDS = ("tanh", "identity")
+PREFILTER_KINDS = ("highpass", "lowpass")
 
 
-def _nonlinearity_form(value) -> dict | None:
-    """The ``input_nonlinearity_form`` field checked: null or {"kind": "tanh", "scale": s > 0, "gain", "offset"}."""
+def _prefilter(value, fs: float) -> dict | None:
+    """The form's ``prefilter`` checked: null or {"kind": "highpass" | "lowpass", "order": 1 | 2, "corner_hz": f}."""
+    if value is None:
+        return None
+    try:
+        kind, order, corner = value["kind"], value.get("order", 1), float(value["corner_hz"])
+    except (TypeError, KeyError, ValueError):
+        kind, order, corner = None, None, math.nan
+    if kind not in PREFILTER_KINDS or order not in (1, 2) or isinstance(order, bool) or not 0 < corner < fs / 2:
+        raise ModelError(f'input_nonlinearity_form prefilter must be {{"kind": one of {", ".join(PREFILTER_KINDS)}, '
+                         f'"order": 1 or 2, "corner_hz": between 0 and fs/2}}; found {value!r}')
+    return {"kind": kind, "order": int(order), "corner_hz": corner}
+
+
+def _nonlinearity_form(value, fs: float) -> dict | None:
+    """The ``input_nonlinearity_form`` field checked: null, {"kind": "tanh", "scale": s > 0, "gain", "offset"}
+    or {"kind": "identity"}, either with an optional ``prefilter``."""
     if value is None:
         return None
     if not isinstance(value, dict) or value.get("kind") not in FORM_KINDS:
         raise ModelError(f'input_nonlinearity_form must be null or an object {{"kind": one of {", ".join(FORM_KINDS)}, '
                          '"scale": s, "gain": g, "offset": o}')
+    prefilter = _prefilter(value.get("prefilter"), fs)
+    if value["kind"] == "identity":
+        return {"kind": "identity", **({"prefilter": prefilter} if prefilter else {})}
     try:
         scale, gain, offset = (float(value.get(key, default)) for key, default in
                                (("scale", math.nan), ("gain", 1.0), ("offset", 0.0)))
@@ -114,7 +140,8 @@ def _nonlinearity_form(value) -> dict | None:
         raise ModelError(f"input_nonlinearity_form scale must be a positive amplitude (FS); found {value.get('scale')!r}")
     if not (math.isfinite(gain) and abs(gain) <= MAX_COEFFICIENT and math.isfinite(offset) and abs(offset) <= 10 * scale):
         raise ModelError("input_nonlinearity_form gain must be finite and offset within ten times the scale")
-    return {**value, "kind": value["kind"], "scale": scale, "gain": gain, "offset": offset}
+    return {**value, "kind": value["kind"], "scale": scale, "gain": gain, "offset": offset,
+            **({"prefilter": prefilter} if prefilter else {})}
 
 
 def _uncertainty_band(value) -> dict | None:
@@ -236,7 +263,7 @@ class Model:
         except (TypeError, ValueError):
             raise ModelError("excluded must map each recording to [[start_s, stop_s], ...]") from None
         self.uncertainty = _uncertainty_band(self.uncertainty)
-        self.input_nonlinearity_form = _nonlinearity_form(self.input_nonlinearity_form)
+        self.input_nonlinearity_form = _nonlinearity_form(self.input_nonlinearity_form, self.fs)
 
     # -- properties -------------------------------------------------------------
     @property
@@ -270,22 +297,38 @@ class Model:
     def frequency_response(self, frequencies_hz) -> np.ndarray:
         """Complex response of the linear part (delay included) at frequencies in Hz.
 
-        The input nonlinearity contributes its small-signal gain (a1, times g / cosh^2(o / s) of a form).
+        The input nonlinearity contributes its small-signal gain (a1, times g / cosh^2(o / s) of a form)
+        and its form's pre-filter.
         """
         f = np.asarray(frequencies_hz, dtype=float)
         z = np.exp(2j * np.pi * f / self.fs)
         response = lti.frequency_response(self.A, self.B, self.C, self.D, z) * z ** (-self.delay)
         if self.input_nonlinearity is not None:
             response = response * self.input_nonlinearity[0]
-        if self.input_nonlinearity_form is not None:
-            form = self.input_nonlinearity_form
+        form = self.input_nonlinearity_form or {}
+        if form.get("kind") == "tanh":
             response = response * form["gain"] / math.cosh(form["offset"] / form["scale"]) ** 2
+        if form.get("prefilter"):
+            response = response * factor_response(*self.input_prefilter(), f, self.fs)
         return response
 
+    def input_prefilter(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(b, a) of the form's pre-filter (``sysid.core.structures.factor_coefficients``), or None."""
+        prefilter = (self.input_nonlinearity_form or {}).get("prefilter")
+        return None if prefilter is None else factor_coefficients(prefilter["kind"], prefilter, self.fs)
+
     def apply_input_nonlinearity(self, u: np.ndarray) -> np.ndarray:
-        """v = a1 w + a2 w^2 + ... of w = form(u) (the module docstring; identity when the model has neither)."""
+        """The input block on a signal from rest: the form's pre-filter, then the static map
+        (``static_input_nonlinearity``); u itself when the model has neither."""
+        prefilter = self.input_prefilter()
         u = np.asarray(u, dtype=float)
-        if self.input_nonlinearity_form is not None:
+        return self.static_input_nonlinearity(scipy.signal.lfilter(*prefilter, u) if prefilter else u)
+
+    def static_input_nonlinearity(self, u: np.ndarray) -> np.ndarray:
+        """v = a1 w + a2 w^2 + ... of w = form(u) (the module docstring; the pre-filter left out: the map's
+        harmonic levels are those of a sine in the pre-filter's pass band)."""
+        u = np.asarray(u, dtype=float)
+        if (self.input_nonlinearity_form or {}).get("kind") == "tanh":
             form = self.input_nonlinearity_form
             s, o = form["scale"], form["offset"]
             u = form["gain"] * s * (np.tanh((u + o) / s) - math.tanh(o / s))

@@ -3,13 +3,18 @@
 Simulated as a static polynomial u + a2 u^2 + a3 u^3 in front of the plant, given as
 harmonic levels (dB re the fundamental) of a sine at the session's largest input, or with
 ``tanh=1`` as a saturating driver s tanh((u + o)/s) - s tanh(o/s) (a soft clipper, asymmetric by
-its offset o) whose levels hold at the sweeps' amplitude (``saturation``);
+its offset o) whose levels hold at the sweeps' amplitude (``saturation``); with ``prefilter_hz`` > 0
+behind a high-pass of that corner (Hz) and order ``prefilter_order`` (a coupling capacitor in front of
+the part that distorts: a Wiener-Hammerstein driver, the model form's ``prefilter``), the levels
+those of a sine in its pass band;
 detected by regressing the sweep residual on u^2, u^3 through the model's linear part
 (``sysid.findings.nonlinearity``, after the series factors and the delay, whose
 misfit it must not mistake for harmonics), the harmonics also measured on exponential
 sweeps (Farina); refined by a Hammerstein input map fitted together with the core
 (``sysid.refits.add_input_nonlinearity``: a polynomial of degree up to ``degree`` chosen by
-description length, or a tanh saturation, whichever validates better).
+description length, or a tanh saturation, whichever validates better; behind a high-pass whose
+corner is fitted with them where the static map leaves the model above the floor:
+``sysid.estimation.wiener_hammerstein``).
 """
 
 from __future__ import annotations
@@ -37,7 +42,8 @@ def _random(rng):
 INPUT_NONLINEARITY = register(Effect(
     name="input-nonlinearity", summary="static input polynomial (Hammerstein): harmonics at 2f, 3f",
     simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0),
-                     ParameterSpec("tanh", 0, 0, 1, "int")),
+                     ParameterSpec("tanh", 0, 0, 1, "int"), ParameterSpec("prefilter_hz", 0.0, 0.0, 5000.0),
+                     ParameterSpec("prefilter_order", 1, 1, 2, "int")),
     refine_params=(ParameterSpec("degree", 7, 2, 7, "int"),),
     detect="sysid.findings.nonlinearity:nonlinearity_finding",
     needs=("resonance", "highpass", "lowpass", "delay", "clipping"),

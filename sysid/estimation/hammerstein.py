@@ -31,6 +31,7 @@ import scipy.signal
 
 from ..core.errors import IdentificationError
 from ..core.model import Model
+from ..core.structures import factor_coefficients
 from ..core.thresholds import IDENTIFICATION_BAND
 from ..io.recordings import Recording
 from .input_nonlinearity import tanh_map
@@ -155,14 +156,16 @@ def _tanh_starts(fits, peak: float):
 
 def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
                     core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
-                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS) -> HammersteinFit:
+                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS, prefilter: dict | None = None) -> HammersteinFit:
     """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on
     ``noise`` (the recording as the core sees it: the ear signal without disturbance or offset, the input
     raw) after its first ``transient_s``; see the module docstring. The map is fitted on the first
     ``seconds`` after the transient (simulated from the recording's start), the core on the first
     ``core_seconds`` (default: ``seconds``; the frequency-domain step is cheap, and a core of lightly damped
     modes needs the longer record). ``model``'s own input map is replaced; its delay is kept, and its core
-    is the start.
+    is the start. A ``prefilter`` (the model form's, ``sysid.core.model``) is held in front of the map
+    (a Wiener-Hammerstein model): the map and the core are fitted on the input it filters from the
+    recording's start, and the fitted form carries it.
     """
     if kind not in ("polynomial", "tanh"):
         raise ValueError(f"kind must be polynomial or tanh; found {kind!r}")
@@ -171,12 +174,15 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
     start = min(int(round(transient_s * noise.fs)), noise.u.size - 1)
     n = min(noise.u.size, start + int(round(seconds * noise.fs)))
     # The input as recorded (the map acts on it so); the band-pass takes the ear signal's mean out.
-    u, y = noise.u[:n], noise.y[:n]
+    filtered = noise.u if prefilter is None else scipy.signal.lfilter(
+        *factor_coefficients(prefilter["kind"], prefilter, noise.fs), noise.u)
+    u, y = filtered[:n], noise.y[:n]
     stretch = _Stretch(u, y, noise.fs, band, start)
+    cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(
+        noise.u[:n]))) ** 2))
     m = min(noise.u.size, start + int(round((core_seconds or seconds) * noise.fs)))
-    core_u, core_y = noise.u[start:m], noise.y[start:m]
+    core_u, core_y = filtered[start:m], noise.y[start:m]
     core = (model.A, model.B, model.C, model.D)
-    cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(u))) ** 2))
     history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None
     for done in range(1, rounds + 1):
         # 1. The map with the core held (its gain moved into the core).
@@ -208,4 +214,6 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
         history.append(error)
         if len(history) > 1 and history[-2] - error < _GAIN * history[-2]:
             break
+    if prefilter is not None:
+        form, parameters = {**(form or {"kind": "identity"}), "prefilter": dict(prefilter)}, parameters + 1
     return HammersteinFit(*core, coefficients, form, cost_before, history[-1], parameters, done)

@@ -97,7 +97,7 @@ def drive_limit(model: Model, level_db: float = DRIVE_LIMIT_DB, largest: float =
         return None
 
     def distortion(amplitude):
-        levels = harmonic_levels(model.apply_input_nonlinearity, amplitude, range(2, 10))
+        levels = harmonic_levels(model.static_input_nonlinearity, amplitude, range(2, 10))
         return 10 * np.log10(sum(10 ** (v / 10) for v in levels.values()))
 
     grid = np.geomspace(1e-4, largest, int(48 * np.log10(largest / 1e-4)) + 1)

@@ -70,7 +70,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     evidence = {"explained_fraction": explained, "chi2": chi2}
     measured = sweep_harmonics(ctx.sweeps)
     if measured is not None:
-        model = harmonic_levels(ctx.model.apply_input_nonlinearity, measured.amplitude)
+        model = harmonic_levels(ctx.model.static_input_nonlinearity, measured.amplitude)
         # A clipped ear channel has harmonics of its own (the clipper's, after the path): they name clipping.
         clipped = ctx.finding("clipping")
         if measured.snr is not None and not (clipped is not None and clipped["significant"]):

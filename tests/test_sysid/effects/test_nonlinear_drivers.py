@@ -47,6 +47,8 @@ def check_refined_to_the_floor(seed, path, shape, level_db):
     assert auto.after.ratio <= 1.5, text
     assert abs(auto.model.order - true.order) <= 2, (true.order, text)
     assert auto.model.input_nonlinearity_form is not None or auto.model.input_nonlinearity is not None, text
+    # A static driver keeps a static map: no pre-filter (a Wiener-Hammerstein model) is chosen for it.
+    assert "prefilter" not in (auto.model.input_nonlinearity_form or {}), text
     assert auto.model.identification["drive_limit_fs"] is None or auto.model.identification["drive_limit_fs"] > 0
 
 
