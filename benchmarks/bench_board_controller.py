@@ -7,7 +7,9 @@ one given with ``--controller``. Per filter S, Q, W and variant: the section for
 against a full-scale output sine (``codegen.noise``, what --min-snr judges) and the SNR measured
 against the float64 realisation on two sweeps 20 Hz-4 kHz (exponential, linear) whose float64 output
 peaks at -1 dBFS, run through the generated C built for the host (``codegen.verify.verify_host``, which
-also checks the C against the Python twin: 0 LSB for Q15, bit for bit for float32). The closed loop
+also checks the C against the Python twin: 0 LSB for Q15, bit for bit for float32), beside the Q15 variant's
+prediction on that sweep (its absolute round-off at the sweep's output power, ``codegen.verify.sweep_prediction``:
+a filter whose gain spans tens of dB over 20 Hz-4 kHz gives a sweep far quieter than a full-scale sine). The closed loop
 (``firmware/closed_loop.c`` with ``anc_control.c``, per-sample path, on the seed's true FB plant with
 the default wind/engine noise) compares the ear words of the Python twin, the host build and the
 Cortex-M4 ELF on QEMU. The control path's instructions per sample on the emulated Cortex-M4 are
@@ -88,8 +90,9 @@ def filter_rows(plan, seconds: float) -> list[dict]:
                "closest_pole": float(min((1 - abs(p) for s in sub.cascade.sections for p in s.poles), default=1.0))}
         for key, prediction in sub.predictions.items():
             measured = [sweep[key]["snr_vs_float64_db"] for sweep in verification["sweeps"]]
+            on_sweep = [sweep[key].get("predicted_snr_db") for sweep in verification["sweeps"]]
             row[key] = {"form": FORMS[key], "predicted": prediction.snr_db, "coefficients": prediction.coefficient_snr_db,
-                        "roundoff": prediction.roundoff_snr_db, "measured": measured}
+                        "roundoff": prediction.roundoff_snr_db, "measured": measured, "on_sweep": on_sweep}
         rows.append(row)
     return rows
 
@@ -145,14 +148,18 @@ def instruction_counts(plan, fw: Path, root: Path) -> dict:
 
 def render(rows: list[dict], loops: dict, costs: dict, plan) -> str:
     lines = ["| filter | order (sections) | closest pole 1 - abs(p) | variant: form | predicted SNR (coefficients, "
-             "round-off) | measured SNR, exponential / linear sweep | M4 instructions / sample, one-sample call |",
+             "round-off) | measured SNR, exponential / linear sweep (predicted on the sweep) | M4 instructions / "
+             "sample, one-sample call |",
              "|---|---|---|---|---|---|---|"]
     for row in rows:
         for key in plan.variants:
             v = row[key]
+            # A fixed-point variant's round-off is absolute: on a sweep quieter than a full-scale sine its SNR is
+            # lower by the sweep's level (codegen.verify.sweep_prediction); float32's follows the signal.
+            on_sweep = "" if None in v["on_sweep"] else f" ({v['on_sweep'][0]:.1f} / {v['on_sweep'][1]:.1f})"
             lines.append(f"| {row['filter']} | {row['order']} ({row['sections']}) | {row['closest_pole']:.1e} | "
                          f"{key}: {v['form']} | {v['predicted']:.1f} ({v['coefficients']:.1f}, {v['roundoff']:.1f}) | "
-                         f"{v['measured'][0]:.1f} / {v['measured'][1]:.1f} | {costs[key][row['filter']]:.0f} |")
+                         f"{v['measured'][0]:.1f} / {v['measured'][1]:.1f}{on_sweep} | {costs[key][row['filter']]:.0f} |")
     for key in plan.variants:
         path = costs[key]["control path"]
         loop = loops.get(key, {})

@@ -33,7 +33,7 @@ JUDGED_HZ = (50.0, 1000.0)
 CENTRES = np.array(band_centres())
 JUDGED = (CENTRES >= JUDGED_HZ[0]) & (CENTRES <= JUDGED_HZ[1])
 # Random FB seeds of the project's generator; each is paired with the first FF seed from seed + 1000 at its rate.
-RANDOM_FB_SEEDS = (3, 5, 11, 12, 1, 2, 4, 6, 7, 8)
+RANDOM_FB_SEEDS = (3, 5, 11, 12, 1, 2, 4, 6, 7, 8, 9, 10, 13)
 
 
 @dataclass(frozen=True)
