@@ -11,25 +11,18 @@ to imitate harmonics).
 import numpy as np
 import pytest
 from conftest import SHORT
+from nonlinear_cases import polynomial_session, refined_to_the_floor
 
 from sysid.core.model import Model
-from sysid.diagnose import diagnose
 from sysid.estimation.input_nonlinearity import harmonic_levels
-from sysid.identify import identify
 from sysid.random_plant import random_session
-from sysid.refine import format_refinement, refine_auto
-from sysid.refits.machinery import REFIT_OPTIONS
 
 
 def nonlinear_session(seed: int, path: str, shape: str, level_db: float):
     """The session with the driver of ``shape`` whose harmonic is ``level_db`` at the sweeps' amplitude."""
     if shape == "tanh":
         return random_session(seed, path, effects=[f"input-nonlinearity:h3_db={level_db},h2_db=-120,tanh=1"], **SHORT)
-    # simulate states a polynomial's levels at the session's largest input (H2 grows with the amplitude).
-    probe = random_session(seed, path, **SHORT)
-    ratio = max(np.max(np.abs(r.u)) for r in (probe.noise, *probe.sweeps)) / np.max(np.abs(probe.sweeps[0].u))
-    return random_session(seed, path, effects=[f"input-nonlinearity:h2_db={level_db + 20 * np.log10(ratio):.3f},"
-                                               "h3_db=-120"], **SHORT)
+    return polynomial_session(seed, path, level_db)
 
 
 def check_refined_to_the_floor(seed, path, shape, level_db):
@@ -38,14 +31,7 @@ def check_refined_to_the_floor(seed, path, shape, level_db):
     sweep_amplitude = float(np.max(np.abs(session.sweeps[0].u)))
     k = 3 if shape == "tanh" else 2
     assert harmonic_levels(true.apply_input_nonlinearity, sweep_amplitude)[k] == pytest.approx(level_db, abs=0.2)
-    model = identify(session.noise, session.sweeps, path, REFIT_OPTIONS).model
-    findings = diagnose(model, session.noise, session.sweeps)
-    named = [f["effect"] for f in findings.significant[:2]]
-    assert "input-nonlinearity" in named, named
-    auto = refine_auto(model, session.noise, session.sweeps, REFIT_OPTIONS)
-    text = format_refinement(auto.steps, auto.stop_reason)
-    assert auto.after.ratio <= 1.5, text
-    assert abs(auto.model.order - true.order) <= 2, (true.order, text)
+    auto, text, _ = refined_to_the_floor(session, path)
     assert auto.model.input_nonlinearity_form is not None or auto.model.input_nonlinearity is not None, text
     # A static driver keeps a static map: no pre-filter (a Wiener-Hammerstein model) is chosen for it.
     assert "prefilter" not in (auto.model.input_nonlinearity_form or {}), text

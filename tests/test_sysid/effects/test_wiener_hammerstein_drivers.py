@@ -10,24 +10,16 @@ does not reach the floor).
 
 import numpy as np
 import pytest
-from conftest import SHORT
+from nonlinear_cases import polynomial_session, refined_to_the_floor
 
 from sysid.core.model import Model
-from sysid.diagnose import diagnose
 from sysid.estimation.input_nonlinearity import harmonic_levels
-from sysid.identify import identify
-from sysid.random_plant import random_session
-from sysid.refine import format_refinement, refine_auto
-from sysid.refits.machinery import REFIT_OPTIONS
 
 
 def coupled_session(seed: int, path: str, corner_hz: float, level_db: float):
     """The session of u + a2 u^2 (second harmonic ``level_db`` at the sweeps' amplitude) behind a first-order
     high-pass at ``corner_hz``."""
-    probe = random_session(seed, path, **SHORT)
-    ratio = max(np.max(np.abs(r.u)) for r in (probe.noise, *probe.sweeps)) / np.max(np.abs(probe.sweeps[0].u))
-    return random_session(seed, path, effects=[f"input-nonlinearity:h2_db={level_db + 20 * np.log10(ratio):.3f},"
-                                               f"h3_db=-120,prefilter_hz={corner_hz}"], **SHORT)
+    return polynomial_session(seed, path, level_db, extra=f",prefilter_hz={corner_hz}")
 
 
 def check_refined_to_the_floor(seed, path, corner_hz, level_db):
@@ -36,14 +28,7 @@ def check_refined_to_the_floor(seed, path, corner_hz, level_db):
     assert true.input_nonlinearity_form["prefilter"]["corner_hz"] == corner_hz
     sweep_amplitude = float(np.max(np.abs(session.sweeps[0].u)))
     assert harmonic_levels(true.static_input_nonlinearity, sweep_amplitude)[2] == pytest.approx(level_db, abs=0.2)
-    model = identify(session.noise, session.sweeps, path, REFIT_OPTIONS).model
-    findings = diagnose(model, session.noise, session.sweeps)
-    named = [f["effect"] for f in findings.significant[:2]]
-    assert "input-nonlinearity" in named, named
-    auto = refine_auto(model, session.noise, session.sweeps, REFIT_OPTIONS)
-    text = format_refinement(auto.steps, auto.stop_reason)
-    assert auto.after.ratio <= 1.5, text
-    assert abs(auto.model.order - true.order) <= 2, (true.order, text)
+    auto, text, _ = refined_to_the_floor(session, path)
     assert auto.model.input_nonlinearity is not None, text
     return auto
 
