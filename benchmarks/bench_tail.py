@@ -14,29 +14,20 @@ from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import time
+from pathlib import Path
 
-from sysid.core import lti
-from sysid.core.model import MAX_ORDER, Model
-from sysid.core.thresholds import IDENTIFICATION_BAND, TRANSIENT_S
+from sysid.core.model import MAX_ORDER
 from sysid.diagnose import diagnose
-from sysid.estimation.long_response import fir_estimate, frequency_limited_truncation
 from sysid.refine import refine_auto
-from sysid.simulate import measured_session
 
-CAPPED = {"fabian_left_az60": (12, 256), "hptf_hd600_left": (60, 2048)}
+# The capped models are the reverberant-tail test's (tests/tail_cases.py).
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from tail_cases import CAPPED, capped_session  # noqa: E402
+
 THESIS = dict(noise_duration=23.0, sweep_duration=8.0, sweep_silence=0.5)
 SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
-
-
-def capped(name: str, spec: dict):
-    session = measured_session(name, **spec)
-    noise = session.noise
-    order, length = CAPPED[name]
-    taps = fir_estimate(noise.u, noise.y, noise.fs, length, int(TRANSIENT_S * noise.fs)).taps
-    system, _ = frequency_limited_truncation(taps, noise.fs, (0.0, IDENTIFICATION_BAND[1])).realisation(order)
-    A, B, C, D = lti.balanced_realisation(*system)
-    return session, Model(path="fb", fs=noise.fs, A=A, B=B, C=C, D=D, identification={"order": order, "max_order": order})
 
 
 def timed(function):
@@ -56,7 +47,7 @@ def main() -> None:
           "refine --auto CPU / wall (s) | after (x floor) | order |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in CAPPED:
-        session, model = capped(name, spec)
+        session, model = capped_session(name, **spec)
         findings, d_cpu, d_wall = timed(lambda: diagnose(model, session.noise, session.sweeps))
         tail = next(f for f in findings if f.effect == "reverberant-tail")
         auto, r_cpu, r_wall = timed(lambda: refine_auto(model, session.noise, session.sweeps, max_order=MAX_ORDER))

@@ -13,13 +13,13 @@ from functools import lru_cache
 import numpy as np
 import pytest
 from effect_sessions import effect_case
+from tail_cases import CAPPED, capped_session
 
 from helmet_anc.cli import main
-from sysid.core import lti
 from sysid.core.model import MAX_ORDER, Model
 from sysid.core.thresholds import AT_FLOOR, IDENTIFICATION_BAND, TRANSIENT_S
 from sysid.diagnose import diagnose, format_findings
-from sysid.estimation.long_response import fir_estimate, frequency_limited_truncation
+from sysid.estimation.long_response import fir_estimate
 from sysid.findings.tail import (band_envelope, length_above_noise, ladder_text, long_response, noise_rms,
                                  tail_spectra, truncation_ladder)
 from sysid.identify import IdentificationOptions, identify
@@ -29,22 +29,12 @@ from sysid.simulate import measured_session, write_session
 from sysid.validation.compare import compare
 
 SHORT = dict(noise_duration=8.0, sweep_duration=2.0, sweep_silence=0.2)
-# The cap (states) of each capped model, well below what its response needs, and the FIR it is truncated from.
-CAPPED = {"fabian_left_az60": (12, 256), "hptf_hd600_left": (60, 2048)}
 
 
 @lru_cache(maxsize=None)
 def capped_case(name: str):
     """(session, the model capped at CAPPED[name] states, its comparison)."""
-    session = measured_session(name, **SHORT)
-    noise = session.noise
-    order, length = CAPPED[name]
-    taps = fir_estimate(noise.u, noise.y, noise.fs, length, int(TRANSIENT_S * noise.fs)).taps
-    system, _ = frequency_limited_truncation(taps, noise.fs, (0.0, IDENTIFICATION_BAND[1])).realisation(order)
-    A, B, C, D = lti.balanced_realisation(*system)
-    model = Model(path="fb", fs=noise.fs, A=A, B=B, C=C, D=D,
-                  identification={"method": "long estimate, frequency-limited truncation", "order": order,
-                                  "max_order": order, "noise_file": noise.path})
+    session, model = capped_session(name, **SHORT)
     return session, model, compare(model, session.sweeps)
 
 
