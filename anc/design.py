@@ -380,7 +380,10 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     drive = drive_level(fb_model, disturbance, fb, ff)
     if drive["scale"] < 1.0 and options.drive_limit:
         fb, ff, margins = _within_drive_limit(drive["scale"], fb, ff, margins, fb_design if fb is not None else None)
-        drive = dict(drive_level(fb_model, disturbance, fb, ff), applied_scale=drive["scale"])
+        # The drive is linear in Q and W: its level scales with them (the peaks now at the limit).
+        scale = drive["scale"]
+        drive = dict(drive, rms_fs=scale * drive["rms_fs"], peak_fs=scale * drive["peak_fs"], scale=1.0,
+                     applied_scale=scale)
     if drive["limit_fs"] is not None:
         notes.append(_drive_note(drive))
     predicted, overall, coherence = predict(fb_model, disturbance, options.latency, fb, ff)
