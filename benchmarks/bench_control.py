@@ -8,11 +8,12 @@ on the TRUE plants against a fresh noise realisation (``control_cases.judge``). 
 Markdown row, means over the third-octave bands 50 Hz-1 kHz (dB, positive = quieter at the ear): the
 bounds the controller records (causal feed-forward, coherence, robust feedback), ours judged (ff, fb,
 both), FxLMS converged (normalised, 128 taps, the identified S as its secondary-path model, step from
-its stability bound, ``anc.fxlms.run_to_convergence``) with the time to reach it, the filters' orders
+its stability bound, the record doubled until it converges, up to ``--fxlms-longest`` seconds,
+``anc.fxlms.run_until_converged``) with the time to reach it, the filters' orders
 and the design's CPU time. The emulated Cortex-M4's instructions per sample of the
 control path is measured by ``benchmarks/bench_control_loop.py``.
 
-    python benchmarks/bench_control.py [--pairs seed,3,11] [--fxlms-seconds S]
+    python benchmarks/bench_control.py [--pairs seed,3,11] [--fxlms-seconds S] [--fxlms-longest S] [--fxlms-only]
 """
 
 from __future__ import annotations
@@ -30,9 +31,10 @@ from control_cases import (JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pa
                            recording_with_anc_off, road_noise, seed_pair)
 
 from anc import design  # noqa: E402
+from anc.controller import BOARD_LATENCY_SAMPLES  # noqa: E402
 from anc.design import board_cost  # noqa: E402
 from anc.disturbance import from_recording  # noqa: E402
-from anc.fxlms import run_to_convergence  # noqa: E402
+from anc.fxlms import run_until_converged  # noqa: E402
 from sysid.core.errors import HelmetAncError  # noqa: E402
 
 
@@ -41,21 +43,38 @@ def _mean(values) -> float:
     return float(np.mean(chosen)) if chosen else float("nan")
 
 
+def _fxlms_text(fx) -> str:
+    """FxLMS's converged attenuation, the time to reach it and its record, the step against its bound."""
+    return (f"{fx.attenuation_db:.1f} dB ({fx.seconds:.1f} s of {fx.run_seconds:.0f} s" if fx.converged else
+            f"not converged in {fx.run_seconds:.0f} s ({fx.attenuation_db:.1f} dB at the end") + \
+        f", {fx.mu:.2g} / {fx.mu_bound:.2g})"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--pairs", default=",".join(["seed", *map(str, RANDOM_FB_SEEDS)]),
                         help="comma-separated: seed and random FB seeds")
-    parser.add_argument("--fxlms-seconds", type=float, default=8.0)
+    parser.add_argument("--fxlms-seconds", type=float, default=8.0, help="the first noise record (s)")
+    parser.add_argument("--fxlms-longest", type=float, default=512.0, help="the longest record tried (s)")
+    parser.add_argument("--fxlms-only", action="store_true", help="FxLMS alone, at the board's latency")
     args = parser.parse_args()
     wall, cpu = time.perf_counter(), time.process_time()
-    print("| pair | causal ff bound | coherence bound | robust fb bound | ours ff | ours fb | ours both | "
-          "FxLMS converged (time, step / bound) | W order (of) | Q order (of) | design CPU s | board instructions "
-          "per sample |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    if args.fxlms_only:
+        print("| pair | FxLMS converged (time of record, step / bound) |\n|---|---|")
+    else:
+        print("| pair | causal ff bound | coherence bound | robust fb bound | ours ff | ours fb | ours both | "
+              "FxLMS converged (time, step / bound) | W order (of) | Q order (of) | design CPU s | board instructions "
+              "per sample |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for key in args.pairs.split(","):
         name = "seed" if key == "seed" else f"random {int(key)}"
         pair = seed_pair() if key == "seed" else random_pair(int(key))
         s_id, p_id = identified(name)
+        if args.fxlms_only:
+            _, fx = run_until_converged(pair.s, s_id, lambda s, p=pair.p: road_noise(p, s, 5), args.fxlms_seconds,
+                                        args.fxlms_longest, BOARD_LATENCY_SAMPLES, 128)
+            print(f"| {pair.name} | {_fxlms_text(fx)} |")
+            continue
         disturbance = from_recording(recording_with_anc_off(pair.p), s_id.fs, ff_model=p_id)
         started = time.process_time()
         try:
@@ -65,11 +84,9 @@ def main() -> None:
             continue
         seconds = time.process_time() - started
         judged = judge(controller, pair)
-        x, d = road_noise(pair.p, args.fxlms_seconds, 5)
-        _, fx = run_to_convergence(pair.s, s_id, x, d, controller.latency_samples, 128)
-        fx_text = (f"{fx.attenuation_db:.1f} dB ({fx.seconds:.1f} s" if fx.converged else
-                   f"not converged in {fx.run_seconds:.0f} s ({fx.attenuation_db:.1f} dB at the end") + \
-            f", {fx.mu:.2g} / {fx.mu_bound:.2g})"
+        _, fx = run_until_converged(pair.s, s_id, lambda s, p=pair.p: road_noise(p, s, 5), args.fxlms_seconds,
+                                    args.fxlms_longest, controller.latency_samples, 128)
+        fx_text = _fxlms_text(fx)
         limits = controller.limits or {}
         t = controller.provenance.get("truncation", {})
         orders = [f"{t[k]['order']} ({t[k]['full_order']})" if k in t else "-" for k in ("ff", "fb")]

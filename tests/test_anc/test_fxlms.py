@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from control_cases import random_pair, road_noise, seed_pair
 
+from anc import fxlms
 from anc.fxlms import convergence, diverging, run_fxlms, run_to_convergence, secondary_delay, stable_step
 
 
@@ -42,3 +43,28 @@ def test_runs_to_convergence_at_a_stable_step(pair):
     _, result = run_to_convergence(pair.s, pair.s, x, d, 2, 64)
     assert not diverging(result) and result.converged, result
     assert result.mu <= 0.5 * result.mu_bound and np.isfinite(result.attenuation_db)
+
+
+def test_the_record_is_doubled_until_the_run_converges(monkeypatch):
+    """run_until_converged asks for records of 1, 2, 4 s and stops at the first that converges; without
+    convergence it stops at the longest record it may take and says the run has not converged."""
+    fs = 48000.0
+    pair = seed_pair()
+
+    def judged(s_true, s_model, x, d, latency, taps):
+        converged = x.size >= 4 * fs
+        return None, fxlms.FxlmsResult(-1.0, 0.5, converged, 0.0, 1.0, 0.1, 1.0, x.size / fs)
+
+    monkeypatch.setattr(fxlms, "run_to_convergence", judged)
+    asked = []
+
+    def noise(seconds):
+        asked.append(seconds)
+        n = int(seconds * fs)
+        return np.zeros(n), np.zeros(n)
+
+    _, result = fxlms.run_until_converged(pair.s, pair.s, noise, 1.0, 64.0)
+    assert asked == [1.0, 2.0, 4.0] and result.converged and result.run_seconds == 4.0
+    asked.clear()
+    _, result = fxlms.run_until_converged(pair.s, pair.s, noise, 1.0, 3.0)
+    assert asked == [1.0, 2.0] and not result.converged and result.run_seconds == 2.0
