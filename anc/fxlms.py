@@ -41,7 +41,8 @@ import numpy as np
 from sysid.core.model import Model
 
 __all__ = ["FxlmsRun", "FxlmsResult", "run_fxlms", "convergence", "stable_step", "secondary_delay",
-           "run_to_convergence", "run_until_converged", "diverging", "STEP_FRACTION", "FRAME_S", "TAIL_FRACTION", "MAX_REDUCTIONS"]
+           "run_to_convergence", "run_until_converged", "diverging", "STEP_FRACTION", "FRAME_S", "TAIL_FRACTION",
+           "MAX_REDUCTIONS"]
 
 STEP_FRACTION = 0.5
 MAX_REDUCTIONS = 6
