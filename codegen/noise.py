@@ -18,6 +18,14 @@ variant adds below full scale:
   section's output power);
   the Q15 output quantiser adds (2^-15)^2 / 12; SNR_r = 10 log10(0.5 / P_r).
 
+The white-noise model of the Q15 quantisers is a steady state: the error-feedback residues start at
+their mean (``codegen.fixedpoint.EFB_RESIDUE_AT_REST``), so a filter started from rest has no start
+transient (started at 0 they rang every section's 1 / A_k unshaped: 718 times the prediction over
+0.4 s on the seed pair's W, poles at 0.9986-0.9992). It assumes each quantiser's residue is white,
+which needs its input to move by about a step per sample or more: a pole pair at 0.9992 and 4 Hz whose
+output is 640 steps rms at 4 Hz (0.3 steps per sample; noise at -72 dBFS into a cascade of 60 dB peak
+gain) gave 3 times the predicted round-off, the first-order shaper's idle tones on the resonance.
+
 The predicted SNR combines both, 1/snr = 1/snr_c + 1/snr_r (linear ratios).
 Overflow margins are given per node as 20 log10(1 / peak gain) for a full-scale
 sine (L-infinity) and for the worst-case input (L1 norm of the impulse response).

@@ -22,7 +22,7 @@ import numpy as np
 
 from sysid.core import lti
 
-from .fixedpoint import FixedDesign, FixedSection
+from .fixedpoint import EFB_RESIDUE_AT_REST, FixedDesign, FixedSection
 from .float32 import FloatDesign
 from .realise import Realisation
 
@@ -59,10 +59,11 @@ def _history(x: np.ndarray, lag: int) -> np.ndarray:
 def fixed_section(section: FixedSection, x: np.ndarray, quantiser: str, state=None) -> tuple[np.ndarray, tuple]:
     """One section of the Q15 filter (:mod:`codegen.fixedpoint`) on Q31 input x (int64 array).
 
-    ``state`` is (x1, x2, y1, y2, e) from a previous call (None: from rest); returns the
-    Q31 output and the state after the last sample, so blocks can be chained.
+    ``state`` is (x1, x2, y1, y2, e) from a previous call (None: from rest, the residue e at
+    its mean ``EFB_RESIDUE_AT_REST``); returns the Q31 output and the state after the last sample, so
+    blocks can be chained.
     """
-    x1, x2, y1, y2, e = state or (0, 0, 0, 0, 0)
+    x1, x2, y1, y2, e = state or (0, 0, 0, 0, EFB_RESIDUE_AT_REST)
     b0, b1, b2 = section.b
     a1, a2 = section.a
     d, guard = section.feedback_shift, section.guard
