@@ -14,7 +14,9 @@ amplitude: ``measured_h2_db``/``measured_h3_db`` and ``model_h2_db``/``model_h3_
 levels against the sweep's frequency in the evidence (the diagnosis figure draws them). A harmonic
 the model lacks that stands well above the output noise in its window (``FARINA_SNR``) makes the
 finding significant by itself: a linear part far from the truth (a strong saturation hides modes from
-the identification) leaves the regression too little to explain, the separated harmonic stays.
+the identification) leaves the regression too little to explain, the separated harmonic stays. The other way round, a harmonic the regression claims that the separated
+responses would show above their noise but do not (``refuted_by_sweeps``) is no nonlinearity: a linear misfit
+on a clean session can follow the harmonic columns, the sweeps' separation cannot invent harmonics.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from ..estimation.input_polynomial import input_polynomial
 from . import DiagnosisContext, finding, uses
 from .dynamics import has_series_factor, with_series_factor
 
-__all__ = ["nonlinearity_finding"]
+__all__ = ["nonlinearity_finding", "refuted_by_sweeps"]
 
 # The harmonic columns must explain this fraction of the residual energy left by the
 # linear column, and be far beyond chance (N times the relative gain, ~chi^2 with 2 dof).
@@ -40,6 +42,27 @@ PLAUSIBLE_DB = -10.0
 # identified at 4 states for 16, 1205x the floor, the harmonic columns explain 4 %).
 FARINA_SNR = 4.0
 MISSED_DB = 6.0
+
+
+def refuted_by_sweeps(a2: float, a3: float, measured) -> bool:
+    """Whether Farina's separation on the sweeps refutes the regression's polynomial a2 u^2 + a3 u^3: every
+    harmonic it claims at the sweeps' amplitude A (H2 = |a2| A / 2, H3 = |a3| A^2 / 4, dB re the fundamental) that
+    would stand ``FARINA_SNR`` above the output noise in its window is measured ``MISSED_DB`` or more below the
+    claim, and at least one would. A static nonlinearity puts its harmonics on a sine of any frequency, so a
+    claim the separated responses do not show is the regression fitting something else (a linear misfit:
+    random helmet 535 FB, delay read 2 samples long, 82x the floor, H3 claimed -29.7 dB, -64.9 measured at
+    the noise)."""
+    if measured.snr is None:
+        return False
+    A = measured.amplitude
+    claims = {2: abs(a2) * A / 2, 3: abs(a3) * A**2 / 4}
+    seen = []
+    for k, claim in claims.items():
+        claim_db = 20 * np.log10(max(claim, 1e-12))
+        noise_db = measured.levels_db[k] - 10 * np.log10(max(measured.snr[k], 1e-300))
+        if claim_db >= noise_db + 10 * np.log10(FARINA_SNR):
+            seen.append(measured.levels_db[k] <= claim_db - MISSED_DB)
+    return bool(seen) and all(seen)
 
 
 @uses()
@@ -76,9 +99,15 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
         if measured.snr is not None and not (clipped is not None and clipped["significant"]):
             missed = [measured.snr[k] / FARINA_SNR for k in (2, 3)
                       if measured.levels_db[k] >= model[k] + MISSED_DB and measured.levels_db[k] < PLAUSIBLE_DB]
+            refuted = refuted_by_sweeps(a2, a3, measured)
+            if refuted:
+                significant = False
+                explanation += ("; but the sweeps' separated harmonics (Farina) lie more than "
+                                f"{MISSED_DB:g} dB below what the regression claims where they would stand out of the "
+                                "noise: the residual is a linear misfit the harmonic columns happen to follow")
             if missed and max(missed) >= 1.0:
                 significant, score = True, max(score, 1.0 + float(np.log10(max(missed))))
-            evidence.update(harmonic_snr={str(k): float(v) for k, v in measured.snr.items()})
+            evidence.update(harmonic_snr={str(k): float(v) for k, v in measured.snr.items()}, refuted_by_sweeps=refuted)
         params.update(sweep_amplitude_fs=float(measured.amplitude), measured_h2_db=float(measured.levels_db[2]),
                       measured_h3_db=float(measured.levels_db[3]), model_h2_db=float(model[2]), model_h3_db=float(model[3]))
         evidence.update(harmonic_frequencies_hz=measured.frequencies_hz.tolist(),
