@@ -40,3 +40,14 @@ def test_an_input_offset_is_named_on_the_input_channel():
     top = diagnose(model, session.noise, session.sweeps).significant[0]
     assert top["effect"] == "dc-offset" and "input" in top["params"]["channel"]
     assert top["params"]["offset_fs"] == pytest.approx(0.01, abs=1e-3)
+
+
+@pytest.mark.slow
+def test_the_models_own_response_in_the_silence_is_no_ear_offset():
+    """Clean random helmet 20 FB (a short session at the nominal order): the model's prediction rises by more
+    than 1e-4 FS over the sweeps' leading silence (its gain below the sweeps' band on the input's microvolt
+    mean) and the residual's mean, -1.03e-4 FS, drifts with it: no ear offset is named."""
+    session, model = effect_case("fb", 20, ())
+    found = next(f for f in diagnose(model, session.noise, session.sweeps) if f["effect"] == "dc-offset")
+    assert not found["significant"], found["params"]
+    assert abs(found["params"]["offset_fs"]) > 1e-4  # the residual's mean is there, only not an offset
