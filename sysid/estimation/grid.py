@@ -2,7 +2,7 @@
 
 For every gamma the smoothed FRF is decomposed once (one QR and one SVD) and every
 order n comes from that decomposition. Unstable candidates are excluded, as in the
-seed; the stable ones are ranked by the validation rms on both sweeps (the true RMS,
+seed (where none is stable, their unstable poles are reflected into the unit circle instead); the stable ones are ranked by the validation rms on both sweeps (the true RMS,
 see ``validation``), evaluated in compressed form, and the best few re-evaluated
 exactly.
 """
@@ -38,7 +38,7 @@ class Candidate:
 
 @dataclass
 class GridResult:
-    """rms[i, j] for gammas[i], orders[j] (NaN where the model is unstable)."""
+    """rms[i, j] for gammas[i], orders[j] (NaN where the model is unstable; where every one is, the reflected fits)."""
 
     gammas: np.ndarray
     orders: np.ndarray
@@ -157,7 +157,17 @@ def _grid_search(spectra, sweeps, band, gammas, orders, q, feedthrough, keep_bes
         if progress:
             progress(gammas.size + j + 1, gammas.size + orders.size, "grid search")
     if not np.any(np.isfinite(rms)):
-        raise IdentificationError("no stable model in the grid; widen --orders or --gammas")
+        # No candidate is stable (a fixed order on a session whose clock drifts: the phase of the high band
+        # bends): each candidate's unstable poles reflected into the circle (``subspace.stabilise``) rather
+        # than refusing the session; output-error refinement starts from the best of them.
+        for j, order in enumerate(orders):
+            for i, decomposition in enumerate(decompositions):
+                if 1 <= order <= decomposition.max_order:
+                    fit = decomposition.fit(int(order), "reflect")
+                    fits[(int(gammas[i]), int(order))] = fit
+                    rms[i, j] = validation.rms(lti.frequency_response(fit.A, fit.B, fit.C, fit.D, z_coarse)[None])[0]
+    if not np.any(np.isfinite(rms)):
+        raise IdentificationError("no model in the grid; widen --orders or --gammas")
     # Re-evaluate the best candidates exactly at every sweep bin.
     t0 = time.perf_counter()
     flat = np.argsort(np.where(np.isfinite(rms), rms, np.inf), axis=None)[:keep_best]

@@ -3,11 +3,15 @@
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from conftest import short_spec
+from effect_sessions import NOMINAL_ORDER
+
 from sysid.core import lti
 from sysid.core.thresholds import IDENTIFICATION_BAND
 from sysid.estimation.grid import grid_search
 from sysid.estimation.spectra import estimate_spectra, response, smooth_spectra
 from sysid.estimation.subspace import SubspaceDecomposition
+from sysid.simulate import simulate_session
 from sysid.validation.sweeps import CompressedValidation, rms_from_responses, sweep_spectrum
 
 GAMMAS = (10, 40, 160, 400, 1000)
@@ -43,3 +47,22 @@ def test_every_candidate_is_the_subspace_fit_of_its_width_and_order(sessions):
                                                                np.exp(2j * np.pi * s.frequencies / s.fs)) for s in sweeps])
     assert chosen.rms == exact == min(c.rms for c in grid.best)
     assert np.nanmin(grid.rms) <= chosen.rms * 1.01
+
+
+
+def test_where_no_candidate_is_stable_the_reflected_fits_are_ranked():
+    """The seed's FB path at its nominal order on a short session whose clock drifts by -92 ppm: every fit of
+    the grid has a pole outside the unit circle; the candidates are the fits with those poles reflected (all
+    stable), not a refused session."""
+    session = simulate_session(short_spec("fb", 31), effects=["clock-drift:-92.25"])
+    spectra = estimate_spectra(session.noise.trimmed(3.0))
+    sweeps = [sweep_spectrum(s) for s in session.sweeps]
+    gammas, order = (100, 300, 500), NOMINAL_ORDER["fb"]
+    with threadpool_limits(limits=1, user_api="blas"):
+        unstable = [SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g, q=30).fit_if_stable(order)
+                    for frf in (response(smooth_spectra(spectra, gamma), IDENTIFICATION_BAND) for gamma in gammas)]
+    assert all(fit is None for fit in unstable)
+    grid = grid_search(spectra, sweeps, IDENTIFICATION_BAND, gammas, (order,))
+    assert grid.best and np.all(np.isfinite(grid.rms))
+    for candidate in grid.best:
+        assert np.max(np.abs(np.linalg.eigvals(candidate.fit.A))) < 1.0
