@@ -2,7 +2,8 @@
 
 For every gamma the smoothed FRF is decomposed once (one QR and one SVD) and every
 order n comes from that decomposition. Unstable candidates are excluded, as in the
-seed (where none is stable, their unstable poles are reflected into the unit circle instead); the stable ones are ranked by the validation rms on both sweeps (the true RMS,
+seed (where none is stable, their unstable poles are reflected into the unit circle
+instead); the stable ones are ranked by the validation rms on both sweeps (the true RMS,
 see ``validation``), evaluated in compressed form, and the best few re-evaluated
 exactly.
 """

@@ -59,8 +59,9 @@ def test_where_no_candidate_is_stable_the_reflected_fits_are_ranked():
     sweeps = [sweep_spectrum(s) for s in session.sweeps]
     gammas, order = (100, 300, 500), NOMINAL_ORDER["fb"]
     with threadpool_limits(limits=1, user_api="blas"):
+        responses = [response(smooth_spectra(spectra, gamma), IDENTIFICATION_BAND) for gamma in gammas]
         unstable = [SubspaceDecomposition(2 * np.pi * frf.frequencies / spectra.fs, frf.g, q=30).fit_if_stable(order)
-                    for frf in (response(smooth_spectra(spectra, gamma), IDENTIFICATION_BAND) for gamma in gammas)]
+                    for frf in responses]
     assert all(fit is None for fit in unstable)
     grid = grid_search(spectra, sweeps, IDENTIFICATION_BAND, gammas, (order,))
     assert grid.best and np.all(np.isfinite(grid.rms))
