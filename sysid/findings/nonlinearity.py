@@ -14,9 +14,10 @@ amplitude: ``measured_h2_db``/``measured_h3_db`` and ``model_h2_db``/``model_h3_
 levels against the sweep's frequency in the evidence (the diagnosis figure draws them). A harmonic
 the model lacks that stands well above the output noise in its window (``FARINA_SNR``) makes the
 finding significant by itself: a linear part far from the truth (a strong saturation hides modes from
-the identification) leaves the regression too little to explain, the separated harmonic stays. The other way round, a harmonic the regression claims that the separated
-responses would show above their noise but do not (``refuted_by_sweeps``) is no nonlinearity: a linear misfit
-on a clean session can follow the harmonic columns, the sweeps' separation cannot invent harmonics.
+the identification) leaves the regression too little to explain, the separated harmonic stays.
+The other way round, a harmonic the regression claims that the separated responses would show above
+their noise but do not (``refuted_by_sweeps``) is no nonlinearity: a linear misfit on a clean session
+can follow the harmonic columns, the sweeps' separation cannot invent harmonics.
 """
 
 from __future__ import annotations
