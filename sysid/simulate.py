@@ -272,7 +272,8 @@ def _effect_records(hidden: dict[str, dict], spec: SessionSpec, noise_gain: floa
         p = hidden["input-nonlinearity"]
         amplitude = peak_input
         a2 = 2.0 * 10.0 ** (p["h2_db"] / 20.0) / amplitude
-        a3 = 4.0 * 10.0 ** (p["h3_db"] / 20.0) / amplitude**2
+        # compressive=1: u - |a3| u^3, the map a hardening suspension or a saturating amplifier gives.
+        a3 = (-1.0 if p.get("compressive") else 1.0) * 4.0 * 10.0 ** (p["h3_db"] / 20.0) / amplitude**2
         records["input-nonlinearity"] = {"coefficients": [1.0, float(a2), float(a3)], "reference_amplitude": float(amplitude)}
     if "periodic-disturbance" in hidden:
         p = hidden["periodic-disturbance"]

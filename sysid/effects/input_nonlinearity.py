@@ -1,7 +1,8 @@
 """input-nonlinearity: a loudspeaker's Bl(x), Kms(x) or an amplifier, H2/H3 at -45..-30 dB (effects.md).
 
 Simulated as a static polynomial u + a2 u^2 + a3 u^3 in front of the plant, given as
-harmonic levels (dB re the fundamental) of a sine at the session's largest input, or with
+harmonic levels (dB re the fundamental) of a sine at the session's largest input (a3 > 0, an expanding
+map such as a softening suspension's, or with ``compressive=1`` a3 < 0, a hardening one's), or with
 ``tanh=1`` as a saturating driver s tanh((u + o)/s) - s tanh(o/s) (a soft clipper, asymmetric by
 its offset o) whose levels hold at the sweeps' amplitude (``saturation``); with ``prefilter_hz`` > 0
 behind a high-pass of that corner (Hz) and order ``prefilter_order`` (a coupling capacitor in front of
@@ -43,7 +44,7 @@ INPUT_NONLINEARITY = register(Effect(
     name="input-nonlinearity", summary="static input polynomial (Hammerstein): harmonics at 2f, 3f",
     simulate_params=(ParameterSpec("h2_db", -40.0, -120.0, -6.0), ParameterSpec("h3_db", -35.0, -120.0, -6.0),
                      ParameterSpec("tanh", 0, 0, 1, "int"), ParameterSpec("prefilter_hz", 0.0, 0.0, 5000.0),
-                     ParameterSpec("prefilter_order", 1, 1, 2, "int")),
+                     ParameterSpec("prefilter_order", 1, 1, 2, "int"), ParameterSpec("compressive", 0, 0, 1, "int")),
     refine_params=(ParameterSpec("degree", 7, 2, 7, "int"),),
     detect="sysid.findings.nonlinearity:nonlinearity_finding",
     needs=("resonance", "highpass", "lowpass", "delay", "clipping"),

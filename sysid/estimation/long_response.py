@@ -293,7 +293,15 @@ def frequency_limited_truncation(taps: np.ndarray, fs: float, band: tuple[float,
     half_bandwidth = L * top / fs
     # The sinc kernel's eigenvalues fall from one to zero within a few around 2 L f_b / fs.
     count = min(L, int(np.ceil(2.0 * half_bandwidth)) + 40)
-    vectors, ratios = scipy.signal.windows.dpss(L, half_bandwidth, Kmax=count, return_ratios=True)
+    if L > 2:
+        vectors, ratios = scipy.signal.windows.dpss(L, half_bandwidth, Kmax=count, return_ratios=True)
+    else:
+        # scipy's dpss raises for two samples (its sign convention finds no sample of the odd window above its
+        # threshold: a core of two taps behind a long delay, refitted on the seed's FB path through a quadratic
+        # driver): the sinc kernel sin(2 pi W (i - j)) / (pi (i - j)), W = f_b / fs, decomposed directly.
+        width = 2.0 * top / fs
+        ratios, vectors = np.linalg.eigh(width * np.sinc(width * np.subtract.outer(np.arange(L), np.arange(L))))
+        ratios, vectors = ratios[::-1], vectors[:, ::-1].T
     keep = ratios > 1e-12
     factor = vectors[keep].T * np.sqrt(ratios[keep])[None, :]      # L x K: P = factor factor^T
     hankel = scipy.linalg.hankel(taps[1:])

@@ -44,3 +44,25 @@ def test_levels_are_stated_at_the_sessions_largest_input():
     found = nonlinearity_finding(DiagnosisContext(model, session.noise, session.sweeps, compare(model, session.sweeps)))
     assert found["params"]["h2_db"] == pytest.approx(-33.4, abs=1.0)
     assert found["params"]["h3_db"] == pytest.approx(-35.7, abs=1.0)
+
+
+@pytest.mark.parametrize("compressive, sign", [(0, 1.0), (1, -1.0)])
+def test_the_cubic_term_takes_either_sign(compressive, sign):
+    # compressive=1 simulates u - |a3| u^3 (a hardening suspension): H3 at the stated level all the same,
+    # its third harmonic in antiphase with the fundamental (a sine's peaks flattened, not sharpened).
+    session = random_session(3, "fb", effects=[f"input-nonlinearity:h2_db=-120,h3_db=-25,compressive={compressive}"],
+                             **SHORT)
+    record = session.truth["effects"][0]
+    a3 = record["coefficients"][2]
+    assert np.sign(a3) == sign
+    amplitude = record["reference_amplitude"]
+    assert 20 * np.log10(abs(a3) * amplitude**2 / 4) == pytest.approx(-25.0, abs=1e-9)
+    peak = Model.from_dict(session.truth["plant"]).apply_input_nonlinearity(np.array([amplitude]))[0]
+    assert (peak - amplitude) * sign > 0
+
+
+def test_an_existing_polynomial_stays_expanding():
+    # Sessions simulated before the sign existed keep their coefficients: the default is u + a3 u^3.
+    spec = "input-nonlinearity:-33.4,-35.7"
+    session = random_session(100, "fb", effects=[spec], **SHORT)
+    assert session.truth["effects"][0]["coefficients"][2] > 0

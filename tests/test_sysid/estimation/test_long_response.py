@@ -85,3 +85,12 @@ def test_measured_responses_load_with_their_rate():
     session = measured_session("fabian_left_az60", effects=["delay:10"], **SHORT)
     assert session.truth["plant"]["format"] == "helmet-anc/fir-plant@1"
     assert len(session.truth["plant"]["taps"]) == 138
+
+
+@pytest.mark.parametrize("length", [2, 3])
+def test_a_core_of_two_or_three_taps_is_truncated(length):
+    # Two taps are a window scipy's dpss cannot give (IndexError); three it can, the same kernel either way.
+    taps = np.array([0.0, 0.8, -0.3])[:length]
+    truncation = frequency_limited_truncation(taps, 44100.0, (0.0, 5000.0))
+    values = truncation.hankel_singular_values
+    assert values.size >= 1 and np.all(np.isfinite(values)) and values[0] > 0

@@ -226,3 +226,6 @@ def test_freed_pole_dropped_is_the_out_of_band_one_nearest_the_unit_circle():
     pair = 0.999 * np.exp(2j * np.pi * 10.0 / fs)
     assert without_freed_pole(np.array([mode, np.conj(mode), pair, np.conj(pair)]), (20.0, 5000.0), fs).size == 2
     assert without_freed_pole(np.array([mode, np.conj(mode)]), (20.0, 5000.0), fs) is None
+    # The only pole or pair out of band: dropping it leaves no core to refit, so nothing is dropped.
+    assert without_freed_pole(np.array([pair, np.conj(pair)]), (20.0, 5000.0), fs) is None
+    assert without_freed_pole(np.array([freed, 0.9999999]), (20.0, 5000.0), fs).size == 1
