@@ -52,6 +52,7 @@ from ..estimation.output_error import BlockData, refine_output_error
 from ..validation.compare import START_Q, compare, worst_bands
 from .machinery import (REFIT_OPTIONS, _core, _core_body, _disturbance, _output_error_data, _plain_input, _prepared,
                         _refit, _reidentify, _shift, _unmasked_delay, _warm, _with)
+from .nonlinear_order import fewest_states
 
 # The noise recording's stretch (s) the Hammerstein refinement fits the map on (the core: the refit's
 # refine_seconds), and the orders above the model's a core identified anew behind the input map may take.
@@ -164,7 +165,9 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # A core identified anew behind another delay: the corner found for the old one is searched again.
         unmasked = min([unmasked, *_wiener_hammerstein(unmasked, recording, sweeps, [unmasked], params, core_seconds,
                                                         transient_s, joint)], key=lambda t: compare(t, sweeps).rms)
-    best = unmasked
+    # The order the compensated data hold: the order read on the nonlinear data took harmonics for dynamics.
+    shape = "tanh" if (unmasked.input_nonlinearity_form or {}).get("kind") == "tanh" else "polynomial"
+    best, _ = fewest_states(unmasked, sweeps, lambda start: joint(start, shape))
     # The drive a controller may command (sysid.estimation.input_nonlinearity.drive_limit), in the provenance.
     best.identification["drive_limit_fs"] = drive_limit(best)
     form = best.input_nonlinearity_form or {}
