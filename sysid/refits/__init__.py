@@ -11,6 +11,7 @@ builder of each effect (``"sysid.refits:add_delay"``). The model chain is
   refit on the corrected data;
 - ``long_estimate``: more states from the long least-squares estimate (a reverberant tail);
 - ``state_cap``: the state cap refinement holds a model to (``max_order``);
+- ``nonlinear_order``: the core's order chosen again behind a fitted input map (``fewest_states``);
 - ``machinery``: the warm starts and re-identifications both share (``REFIT_OPTIONS``, ``WARM_ENOUGH``).
 """
 

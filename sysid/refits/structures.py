@@ -11,7 +11,8 @@ builder of each effect. The model chain is [input polynomial] -> [z^-delay] -> (
   noise recording (``sysid.estimation.hammerstein``), and, when that leaves the model above
   the floor, behind a high-pass pre-filter whose corner is fitted with them (Wiener-Hammerstein,
   ``sysid.estimation.wiener_hammerstein``); the core re-identified behind the map when that
-  does not reach the floor.
+  does not reach the floor; then its order chosen again on the compensated problem
+  (``sysid.refits.nonlinear_order``: the order read on the nonlinear data took harmonics for dynamics).
 - ``add_periodic_disturbance``: sinusoids at given frequencies, fitted per recording
   and removed from the ear signal before the fit; kept in the model's disturbance
   (not part of the plant) and removed again by ``compare``.
@@ -52,6 +53,7 @@ from ..estimation.output_error import BlockData, refine_output_error
 from ..validation.compare import START_Q, compare, worst_bands
 from .machinery import (REFIT_OPTIONS, _core, _core_body, _disturbance, _output_error_data, _plain_input, _prepared,
                         _refit, _reidentify, _shift, _unmasked_delay, _warm, _with)
+from .nonlinear_order import fewest_states
 
 # The noise recording's stretch (s) the Hammerstein refinement fits the map on (the core: the refit's
 # refine_seconds), and the orders above the model's a core identified anew behind the input map may take.
@@ -91,7 +93,11 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     Each shape (``params["shape"]``: "polynomial", "tanh" or "auto", both) is refined together with the
     current core, which keeps its order; when none reaches the floor the core is identified anew behind the
     best map (every order: the order chosen on the nonlinear data fitted harmonics or missed modes they hid)
-    and refined with the map again. The shape of lowest validation rms is kept (``_refit``).
+    and refined with the map again. The shape of lowest validation rms is kept (``_refit``), and its core
+    truncated to the fewest states that, refitted with the map, validate as well
+    (``sysid.refits.nonlinear_order.fewest_states``): neither the order identified on the distorted session
+    nor the re-identification's (the order of lowest validation rms, up to ``MAX_ORDER_SEARCH`` above) is a
+    bound on what the plant holds once the map takes the harmonics.
     """
     recording = _raw_recording(model, noise)
     shapes = ("polynomial", "tanh") if params.get("shape", "auto") == "auto" else (params["shape"],)
@@ -164,7 +170,9 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # A core identified anew behind another delay: the corner found for the old one is searched again.
         unmasked = min([unmasked, *_wiener_hammerstein(unmasked, recording, sweeps, [unmasked], params, core_seconds,
                                                         transient_s, joint)], key=lambda t: compare(t, sweeps).rms)
-    best = unmasked
+    # The order the compensated data hold: the order read on the nonlinear data took harmonics for dynamics.
+    shape = "tanh" if (unmasked.input_nonlinearity_form or {}).get("kind") == "tanh" else "polynomial"
+    best, _ = fewest_states(unmasked, sweeps, lambda start: joint(start, shape))
     # The drive a controller may command (sysid.estimation.input_nonlinearity.drive_limit), in the provenance.
     best.identification["drive_limit_fs"] = drive_limit(best)
     form = best.input_nonlinearity_form or {}

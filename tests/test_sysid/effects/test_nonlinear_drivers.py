@@ -44,6 +44,14 @@ def test_nonlinear_driver_is_refined_to_the_floor(seed, path, shape, level_db):
     check_refined_to_the_floor(seed, path, shape, level_db)
 
 
+# The default run: a session whose identified order is far above the plant's (random helmet 11 FF, 4 states, H2
+# -15 dB: identified at 28 on the distorted session, the harmonics taken for dynamics), which the refit kept at
+# the floor until the order was chosen again behind the fitted map (``sysid.refits.nonlinear_order``).
+def test_the_core_is_refined_at_the_order_the_data_hold_behind_the_map():
+    auto, text, true = refined_to_the_floor(polynomial_session(11, "ff", -15.0), "ff")
+    assert auto.model.order <= true.order + 2 and auto.after.ratio <= 1.5, text
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("level_db", [-15.0, -30.0])
 @pytest.mark.parametrize("shape", ["tanh", "poly"])
