@@ -29,7 +29,11 @@ def check_refined_to_the_floor(seed, path, corner_hz, level_db):
     sweep_amplitude = float(np.max(np.abs(session.sweeps[0].u)))
     assert harmonic_levels(true.static_input_nonlinearity, sweep_amplitude)[2] == pytest.approx(level_db, abs=0.2)
     auto, text, _ = refined_to_the_floor(session, path)
-    assert auto.model.input_nonlinearity is not None, text
+    # The map the data ask for, polynomial or saturation: at -30 dB behind 2 Hz a tanh with an offset holds
+    # u + a2 u^2 as well (random helmet 8 FB: 1.05x the floor).
+    refined = auto.model.input_nonlinearity is not None or auto.model.input_nonlinearity_form is not None
+    assert refined and harmonic_levels(auto.model.static_input_nonlinearity, sweep_amplitude)[2] == \
+        pytest.approx(level_db, abs=1.0), text
     return auto
 
 
