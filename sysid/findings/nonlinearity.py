@@ -90,15 +90,14 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     # noise recording's peaks, a few standard deviations of its excitation, lie above the sweeps'
     # amplitude (random helmets: 1.6-5.4 dB, so H2 read 1.6-5.4 dB and H3 twice that too low).
     amplitude = float(max(np.max(np.abs(r.u)) for r in (ctx.noise, *ctx.sweeps)))
-    h2 = 20 * np.log10(max(abs(a2) * amplitude / 2, 1e-12))
-    h3 = 20 * np.log10(max(abs(a3) * amplitude**2 / 4, 1e-12))
+    h2, h3 = (20 * np.log10(max(level, 1e-12)) for level in _levels(a2, a3, amplitude))
     # Harmonics above -10 dB are no loudspeaker or amplifier nonlinearity but a sign that the
     # residual is something else that u^3 happens to correlate with (input noise, drift). Judged at
     # the sweeps' amplitude, where the regression is fitted: the cubic read at the noise recording's
     # peaks says nothing of a saturation (the seed's FB path, tanh H3 -20 dB at its sweeps' 0.008 FS,
     # noise peaks at 0.066 FS: +5.8 dB, and a clear nonlinearity went unnamed).
     swept = float(max(np.max(np.abs(r.u)) for r in ctx.sweeps))
-    plausible = max(abs(a2) * swept / 2, abs(a3) * swept**2 / 4) < 10 ** (PLAUSIBLE_DB / 20)
+    plausible = max(_levels(a2, a3, swept)) < 10 ** (PLAUSIBLE_DB / 20)
     significant = explained >= EXPLAINED and chi2 >= CHI2 and plausible
     score = min(explained / EXPLAINED, chi2 / CHI2)
     # The noise recording's regression, its levels judged at that recording's peak, where it was fitted.
