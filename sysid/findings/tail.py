@@ -364,6 +364,21 @@ def ladder_text(table: list, order: int, needed: int | None = None) -> str:
 
 
 @uses("long-response")
+def _ladder_behind(ctx: DiagnosisContext, spectra: list[SweepSpectrum], total_delay: int) -> TruncationLadder:
+    """The truncation ladder of the noise recording's long estimate behind ``total_delay`` samples."""
+    model = ctx.model
+    later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D, delay=total_delay,
+                  input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
+    return truncation_ladder(long_response(later, ctx.noise, ctx.transient_s).taps, ctx.fs, total_delay, spectra,
+                             ctx.comparison.noise_floor, model, start=max(model.order, 2))
+
+
+def _states_needed(ladder: TruncationLadder) -> tuple[float, float]:
+    """Sort key: the states a ladder needs to reach its target (none reaching it last), then its best ratio."""
+    needed = float("inf") if ladder.needed is None else float(ladder.needed)
+    return needed, min(ladder.ratios)
+
+
 def tail_finding(ctx: DiagnosisContext):
     model = ctx.model
     cap = model.identification.get("max_order")
@@ -387,14 +402,14 @@ def tail_finding(ctx: DiagnosisContext):
     if missing is not None and missing["significant"]:
         # A missing delay costs the truncation states of its own: the response is estimated again behind it, and
         # judged there unless that loses what the data hold before it (a measured response's slow onset: the
-        # estimate behind the delay validates worse).
-        later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D,
-                      delay=model.delay + int(missing["params"]["samples"]), input_nonlinearity=model.input_nonlinearity,
-                      output_offset=model.output_offset)
-        behind = truncation_ladder(long_response(later, ctx.noise, ctx.transient_s).taps, fs, later.delay, spectra,
-                                   ctx.comparison.noise_floor, model, start=max(model.order, 2))
-        if behind.fir_ratio <= TAIL_LADDER_SLACK * ladder.fir_ratio:
-            ladder = behind
+        # estimate behind the delay validates worse). The onset of a band-limited recording is blurred over a
+        # sample (the delay's scan reads it to within one), and where the cut falls inside it decides how many
+        # states the truncation spends on it: behind the delay and its two neighbours, the fewest states are kept.
+        found = model.delay + int(missing["params"]["samples"])
+        behind = [_ladder_behind(ctx, spectra, total) for total in (found - 1, found, found + 1) if total > model.delay]
+        kept = [b for b in behind if b.fir_ratio <= TAIL_LADDER_SLACK * ladder.fir_ratio]
+        if kept:
+            ladder = min(kept, key=_states_needed)
     if model.delay > 0:
         # A delay the model holds may cut into a slow onset (a capped model fits it better a few samples later):
         # the response from the input on is judged instead when its estimate validates materially better.

@@ -259,3 +259,16 @@ class TestEnvelope:
 def test_the_ladder_text_shows_the_doublings_and_the_states_needed():
     table = [[60, 16.95], [120, 8.92], [240, 2.91], [300, 1.40], [315, 1.26], [328, 1.19], [480, 1.16]]
     assert ladder_text(table, 60, 328) == "120 states 8.92x, 240 states 2.91x, 328 states 1.19x, 480 states 1.16x"
+
+
+def test_a_missing_delay_whose_onset_falls_between_samples_is_no_tail():
+    # Random FF helmet 20 behind 45 samples more, modelled without them at its nominal order: the long estimate
+    # behind 45 samples needs 15-19 states where behind 44 it needs 6 and behind 46 the model's 5 (the band-limited
+    # onset is spread over a sample, and the cut inside it costs the truncation states). The tail is judged behind
+    # the delay's neighbours too, and the delay is the finding.
+    session, model = effect_case("ff", 20, ("delay:45",))
+    findings = diagnose(model, session.noise, session.sweeps)
+    tail = next(f for f in findings if f["effect"] == "reverberant-tail")
+    assert findings.significant[0]["effect"] == "delay", format_findings(findings)
+    assert abs(findings.significant[0]["params"]["samples"] - 45) <= 1
+    assert not tail["significant"] and tail["params"]["states"] <= model.order + 1, format_findings(findings)
