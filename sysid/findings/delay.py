@@ -20,7 +20,7 @@ from threadpoolctl import threadpool_limits
 from ..core import lti
 from ..core.thresholds import (EXCESS, EXPLAINS_GAIN, FACTOR_EXPLAINS, IDENTIFICATION_BAND, LEADING_PHASE_DEG,
                                MAX_EXTRA_DELAY, TAIL_LADDER_SLACK)
-from ..estimation.delay import delay_centimetres, fixed_pole_scan, generic_pole_scan
+from ..estimation.delay import delay_centimetres, fixed_pole_scan, generic_pole_scan, generic_start
 from ..estimation.output_error import BlockData, block_data, refine_output_error
 from ..io.recordings import Recording
 from ..validation.sweeps import VALIDATION_BAND, rms_from_responses, sweep_spectrum
@@ -79,11 +79,26 @@ def refit_rms(ctx: DiagnosisContext, A, B, C, D, delay: int, max_iterations: int
 
 
 def confirm_delay(ctx: DiagnosisContext, totals) -> dict[int, float]:
-    """Validation-rms gain of quick refits (``refit_rms``) with each total delay over one with the model's."""
+    """Validation-rms gain of quick refits (``refit_rms``) with each total delay over one with the model's: from
+    the model, and from a fresh start behind each (``generic_start``, the model's order), the larger of the two.
+
+    A model fitted without the delay bends its poles to mimic it, and refitted from there it stays near
+    itself, with or without the delay (random FB helmet 31 behind 31 samples, 6 states at 633x the floor:
+    519x from the model at its delay, 458x at 31; from the fresh starts 26x and 1.8x)."""
     m = ctx.model
-    reference = refit_rms(ctx, m.A, m.B, m.C, m.D, m.delay)
-    return {int(d): (reference / rms if rms > 0 else 0.0) for d in totals
-            for rms in [refit_rms(ctx, m.A, m.B, m.C, m.D, int(d))]}
+    data, feedthrough = ctx.value("delay-scan-data"), bool(m.D[0, 0])
+
+    def gains(start) -> dict[int, float]:
+        first = start(m.delay)
+        if first is None:
+            return {}
+        reference = refit_rms(ctx, *first, m.delay)
+        return {int(d): (reference / rms if rms > 0 else 0.0) for d in totals
+                for system in [start(int(d))] if system is not None for rms in [refit_rms(ctx, *system, int(d))]}
+
+    own = gains(lambda d: (m.A, m.B, m.C, m.D))
+    fresh = gains(lambda d: generic_start(data, ctx.fs, d, m.order, feedthrough))
+    return {d: max(own.get(d, 0.0), fresh.get(d, 0.0)) for d in sorted(own.keys() | fresh.keys())}
 
 
 def generic_scan(ctx: DiagnosisContext, max_extra: int = MAX_EXTRA_DELAY) -> int:

@@ -72,7 +72,8 @@ from ..order_search import distinct_start
 from ..output_error import BlockData, block_data, linear_cost, radius_bound_mask, refine_output_error
 from .onset import compensate_delay
 
-__all__ = ["refine_delay", "without_residual_lines", "fixed_pole_scan", "generic_pole_scan"]
+__all__ = ["refine_delay", "without_residual_lines", "fixed_pole_scan", "generic_pole_scan", "generic_poles",
+           "generic_start"]
 
 
 def without_residual_lines(noise: Recording, band: tuple[float, float], A=None, seconds: float = 1.0,
@@ -242,6 +243,26 @@ def fixed_pole_scan(A, data: BlockData, delay: int, max_extra: int = MAX_EXTRA_D
     return int(delays[np.nanargmin(costs)]), costs
 
 
+def generic_poles(fs: float) -> np.ndarray:
+    """The generic pole set (block-diagonal A, fs Hz): second-order modes with Q = 2 at 12 log-spaced
+    frequencies from 30 Hz to 4.5 kHz and two slow real poles, a basis for any smooth path response."""
+    f0 = np.geomspace(30.0, 4500.0, 12)
+    upper = np.exp(-np.pi * f0 / (2.0 * fs)) * np.exp(2j * np.pi * f0 / fs)
+    return lti.real_block_diagonal(np.concatenate([upper, np.conj(upper), [0.9, 0.99]]))
+
+
+def generic_start(data: BlockData, fs: float, delay: int, order: int, feedthrough: bool = False):
+    """(A, B, C, D): a starting model of ``order`` states behind ``delay`` samples that owes nothing to a
+    fitted model's poles: the zeros of the generic poles (``generic_poles``) fitted to ``data`` by linear
+    least squares, then balanced-truncated to ``order`` (None when no truncation holds its response)."""
+    A = generic_poles(fs)
+    n = A.shape[0]
+    fit = refine_output_error(A, np.ones((n, 1)), lti.block_output_row(A), np.zeros((1, 1)), data, delay=delay,
+                              feedthrough=feedthrough, max_iterations=1)
+    truncated = lti.balanced_truncation(fit.A, fit.B, fit.C, fit.D, order=order)
+    return None if truncated is None else truncated[:4]
+
+
 def generic_pole_scan(data: BlockData, fs: float, delay: int, max_extra: int = MAX_EXTRA_DELAY) -> int:
     """Best total delay from ``delay`` to ``delay`` + ``max_extra`` with a fixed generic pole set (fs Hz).
 
@@ -250,9 +271,7 @@ def generic_pole_scan(data: BlockData, fs: float, delay: int, max_extra: int = M
     cost's minimum over d marks the delay even when a model's own poles, bent to
     mimic the delay, make the fixed-pole scan flat. Coarse steps of 2, then +-1.
     """
-    f0 = np.geomspace(30.0, 4500.0, 12)
-    upper = np.exp(-np.pi * f0 / (2.0 * fs)) * np.exp(2j * np.pi * f0 / fs)
-    A = lti.real_block_diagonal(np.concatenate([upper, np.conj(upper), [0.9, 0.99]]))
+    A = generic_poles(fs)
     with threadpool_limits(limits=1, user_api="blas"):
         coarse = {d: linear_cost(A, data, d) for d in range(delay, delay + max_extra + 1, 2)}
         centre = min(coarse, key=coarse.get)

@@ -1,10 +1,12 @@
 """delay: the fixed-pole scan finds a missing delay exactly, and a long one leads the ranking."""
 
 import pytest
+from effect_sessions import effect_case
 from effect_units import true_context
 
 from sysid import effects
 from sysid.core.thresholds import LEADING_PHASE_DEG
+from sysid.diagnose import diagnose, format_findings
 from sysid.findings.delay import delay_finding, scan_delay
 
 
@@ -22,6 +24,17 @@ def test_a_long_missing_delay_leads_and_a_short_one_does_not():
     assert long["evidence"]["excess_phase_deg"] == pytest.approx(360 * 4000 * 23 / 44100)
     short = delay_finding(true_context("ff", 5, ("delay:2",)))
     assert short["evidence"]["excess_phase_deg"] < LEADING_PHASE_DEG and not short["evidence"]["leads"]
+
+
+def test_a_delay_the_model_bent_its_poles_for_is_confirmed_from_a_fresh_start():
+    # Random FB helmet 31 behind 31 samples, fitted without them at its nominal 6 states (633x the floor): the
+    # model's poles mimic the delay, so both scans are flat at them and its quick refit behind 31 samples gains
+    # 1.13x; refits from the generic poles' fit behind 0 and 31 samples validate at 26x and 1.8x.
+    session, model = effect_case("fb", 31, ("delay:31",))
+    findings = diagnose(model, session.noise, session.sweeps)
+    top = findings.significant[0]
+    assert top["effect"] == "delay" and abs(top["params"]["samples"] - 31) <= 1, format_findings(findings)
+    assert top["evidence"]["refit_gain"] > 5.0
 
 
 def test_no_delay_on_the_true_plant():

@@ -6,7 +6,7 @@ import pytest
 from delay_sessions import BAND, behind_delay, with_spare_poles
 
 from sysid.core.model import Model
-from sysid.estimation.delay import (compensate_delay, fixed_pole_scan, generic_pole_scan, refine_delay,
+from sysid.estimation.delay import (compensate_delay, fixed_pole_scan, generic_pole_scan, generic_start, refine_delay,
                                     without_residual_lines)
 from sysid.estimation.output_error import block_data, linear_cost, refine_output_error
 from sysid.io.recordings import Recording
@@ -116,3 +116,17 @@ class TestGenericPoleScan:
         recording = Recording(u, model.simulate(u) + 1e-4 * rng.standard_normal(u.size), model.fs)
         best = generic_pole_scan(block_data(recording, BAND, 1.0), recording.fs, 0, max_extra=100)
         assert delay - 8 <= best <= delay
+
+
+class TestGenericStart:
+    def test_a_start_of_the_given_order_behind_the_delay_refits_to_the_noise(self):
+        # Random helmet 3 behind its own delay: the generic poles' fit truncated to the plant's order is a start
+        # from which output error reaches the noise, with no fitted model's poles to begin from.
+        rp, body = behind_delay(3, 0)
+        data = block_data(body, BAND, 1.0)
+        start = generic_start(data, body.fs, 0, rp.model.order)
+        assert start is not None and start[0].shape == (rp.model.order, rp.model.order)
+        assert np.max(np.abs(np.linalg.eigvals(start[0]))) < 1.0
+        fit = refine_output_error(*start, data, max_iterations=40)
+        truth = linear_cost(rp.model.A, data)
+        assert fit.cost_after <= 1.05 * truth
