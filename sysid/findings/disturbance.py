@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.thresholds import SKIP_S
-from ..io.line_stationarity import is_stationary
-from ..io.lines import LINE_RATIO, driven, fit_sinusoids, quiet_samples
+from ..io.line_stationarity import is_stationary, line_significance
+from ..io.lines import LINE_RATIO, driven, quiet_samples
 from . import DiagnosisContext, finding, noise_prediction, uses
 from .data_quality import session_line_search  # noqa: F401  (the provider of the shared value session-lines)
 from .dynamics import factor_residual, has_series_factor, within_resonance
@@ -27,11 +27,14 @@ __all__ = ["disturbance_finding"]
 
 
 def _in_sweep(residual: np.ndarray, frequency: float, fs: float) -> bool:
-    """Is a sinusoid at frequency in the residual, beyond 5 standard errors of its amplitude?"""
-    fitted = fit_sinusoids(residual, [frequency], fs)
-    level = np.sqrt(np.mean(fitted**2))
-    # Four columns per line: the fitted RMS of pure noise is about sigma sqrt(4 / N).
-    return level > 5.0 * np.std(residual - fitted) * np.sqrt(4.0 / residual.size)
+    """Is a sinusoid at frequency (Hz) in a sweep's residual, beyond 5 standard errors of its amplitude?
+
+    The standard error from the background beside the line in each stretch of the sweep
+    (``sysid.io.line_stationarity.line_significance``): the residual's error is where the sweep and its
+    harmonics are, so its broadband rms (a distorted drive's harmonics at -15 dB) would bury a hum the
+    quiet stretches show.
+    """
+    return line_significance(residual, frequency, fs) > 5.0**2
 
 
 @uses("noise-prediction", "session-lines")

@@ -51,7 +51,7 @@ import scipy.stats
 from ..core.thresholds import LINE_RATIO
 
 __all__ = ["LINE_STRETCH_S", "LINE_SEGMENTS", "STATIONARY_P", "BACKGROUND_OFFSETS", "LineDeparture", "segment_phasors",
-           "line_departure", "is_stationary"]
+           "line_departure", "line_significance", "is_stationary"]
 
 # A stretch: 0.25 s, five periods of the lowest line in band (20 Hz) and a Q-30 mode's correlation time at
 # 40 Hz; its bins are 4 Hz apart, whatever the recording's length.
@@ -153,6 +153,27 @@ def line_departure(x: np.ndarray, frequency: float, fs: float, keep: np.ndarray 
     dof = min(f[2] for f in found)
     return LineDeparture(float(np.median([f[0] for f in found])), float(np.median([f[1] for f in found])),
                          float(scipy.stats.chi2.ppf(1 - STATIONARY_P, dof) / dof))
+
+
+def line_significance(x: np.ndarray, frequency: float, fs: float) -> float:
+    """z^2 of the sinusoid at ``frequency`` (Hz) in x: |a|^2 / var(a) of its phasor a averaged over the
+    stretches of ``LINE_STRETCH_S``, each weighted by its own background (the median of |a_jm|^2 at
+    ``BACKGROUND_OFFSETS`` beside the line in that stretch, over ln 2). Where the background changes
+    along x (a sweep's residual: the model's misfit and the drive's harmonics pass each frequency in
+    turn), the stretches the sweep's error crosses count for little; 0 when no stretch holds the line."""
+    resolution = 1.0 / LINE_STRETCH_S
+    beside = [side * m for m in BACKGROUND_OFFSETS for side in (-1, 1)
+              if 4 * resolution < frequency + side * m * resolution < fs / 2 - 4 * resolution]
+    phasors, gains = segment_phasors(x, frequency, fs, None, [0, *beside])
+    if not beside or phasors.shape[0] == 0:
+        return 0.0
+    noise = np.median(np.abs(phasors[:, 1:]) ** 2, axis=1) / np.log(2)
+    measured = np.isfinite(phasors[:, 0]) & (noise > 0)
+    if not np.any(measured):
+        return 0.0
+    weights = 1.0 / noise[measured]
+    mean = np.sum(weights * phasors[measured, 0]) / np.sum(weights)
+    return float(np.abs(mean) ** 2 * np.sum(weights))
 
 
 def is_stationary(x: np.ndarray, frequency: float, fs: float, keep: np.ndarray | None = None) -> bool:
