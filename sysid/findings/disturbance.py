@@ -9,7 +9,9 @@ transient: a mode the model lacks peaks in the residual too, coherent with the i
 stationary sinusoids there (``sysid.io.line_stationarity.is_stationary``: one phasor over the
 residual's stretches; a mode rung by the drive's distortion products or by ambient noise peaks there
 too, undriven by the linear input, but as a narrowband random process whose phase wanders at the
-mode's bandwidth), each of which must also be present in both sweep residuals.
+mode's bandwidth), each of which must also be present in both sweep residuals (beyond five
+standard errors against the background beside the line, stretch by stretch:
+``sysid.io.line_stationarity.line_significance``).
 """
 
 from __future__ import annotations

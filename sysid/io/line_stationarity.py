@@ -164,7 +164,7 @@ def line_significance(x: np.ndarray, frequency: float, fs: float) -> float:
     resolution = 1.0 / LINE_STRETCH_S
     beside = [side * m for m in BACKGROUND_OFFSETS for side in (-1, 1)
               if 4 * resolution < frequency + side * m * resolution < fs / 2 - 4 * resolution]
-    phasors, gains = segment_phasors(x, frequency, fs, None, [0, *beside])
+    phasors, _ = segment_phasors(x, frequency, fs, None, [0, *beside])
     if not beside or phasors.shape[0] == 0:
         return 0.0
     noise = np.median(np.abs(phasors[:, 1:]) ** 2, axis=1) / np.log(2)

@@ -8,21 +8,16 @@ residuals while their second harmonic passes 45 Hz, but its phase wanders at the
 to it before the input map (2.56x the floor in the end, with a degree-7 polynomial).
 """
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from conftest import SHORT
+from nonlinear_cases import polynomial_session, refined_to_the_floor
 
 from sysid.core.model import Model
 from sysid.findings import DiagnosisContext
 from sysid.findings.disturbance import disturbance_finding
 from sysid.random_plant import random_session
 from sysid.validation.compare import compare
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "effects"))
-from nonlinear_cases import polynomial_session, refined_to_the_floor  # noqa: E402
 
 DISTORTED = (13, "ff", -15.0)
 
@@ -62,6 +57,6 @@ def test_a_hum_beside_the_distortion_is_still_found(level):
 def test_the_distorted_session_is_refined_through_its_input_map_not_a_hum():
     # Identified on the session, diagnosed, ``refine --auto``: input-nonlinearity named and refined to the
     # floor at the true order +- 2, no sinusoid fitted to the mode, the map's degree that of the driver +- 2.
-    auto, text, true = refined_to_the_floor(polynomial_session(*DISTORTED), "ff")
+    auto, text, _ = refined_to_the_floor(polynomial_session(*DISTORTED), "ff")
     assert not any(step.effect == "periodic-disturbance" and step.accepted for step in auto.steps), text
     assert auto.model.input_nonlinearity is None or len(auto.model.input_nonlinearity) <= 2 + 2, text

@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from sysid.io.line_stationarity import LINE_SEGMENTS, is_stationary, line_departure, segment_phasors
+from sysid.io.line_stationarity import (
+    LINE_SEGMENTS,
+    is_stationary,
+    line_departure,
+    segment_phasors,
+)
 from sysid.io.lines import LINE_RATIO, driven, find_lines
 
 FS = 48000.0
