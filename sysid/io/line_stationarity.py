@@ -27,7 +27,7 @@ departs from it two ways (the median over the blocks):
 ``is_stationary``: the departures are within the background's chi-square bound at ``STATIONARY_P`` (a weak
 line: its stretches' phasors are as noisy as the background makes them), or they hold less than
 1 / ``LINE_RATIO`` of the line's energy (a strong line: a modulation too weak to stand out as a line of
-its own by the search's rule; a real hum at 60 dB above the background is never stationary to 1e-6).
+its own by the search's rule; a real hum 60 dB above the background is not constant to a part in a million).
 
 Measured (white background, 48 kHz, every line ``sysid.io.lines.find_lines`` reports; 5 s, 30 seeds):
 sinusoids found at 40 to 1.6e7 times their neighbourhood depart by 0.5-1.8 times the background (bound

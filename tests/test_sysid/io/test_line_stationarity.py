@@ -8,6 +8,7 @@ from sysid.io.line_stationarity import (
     LINE_SEGMENTS,
     is_stationary,
     line_departure,
+    line_significance,
     segment_phasors,
 )
 from sysid.io.lines import LINE_RATIO, driven, find_lines
@@ -80,3 +81,17 @@ def test_the_phasors_share_one_time_axis_and_skip_what_is_left_out():
     keep[: N // LINE_SEGMENTS] = False
     assert np.isnan(segment_phasors(noisy, 50.0, FS, keep=keep)[0][0, 0])
     assert not is_stationary(noisy, 50.0, FS) and is_stationary(noisy, 50.0, FS, keep)
+
+
+def test_a_weak_line_stands_out_of_a_sweeps_error_where_the_sweep_is_elsewhere():
+    # A sweep's residual: a loud error (a distorted drive's harmonics) 0.5 s long and broadband, a hum 40 dB
+    # below it throughout. Against the residual's rms the hum is within the noise; against the background
+    # beside it, stretch by stretch, it is many standard errors out, and a frequency without a line is not.
+    rng = np.random.default_rng(5)
+    n = int(2.4 * FS)
+    error = np.zeros(n)
+    error[int(0.4 * FS):int(0.9 * FS)] = 1e-2 * rng.standard_normal(int(0.5 * FS))
+    hum = np.sqrt(2) * 1e-4 * np.sin(2 * np.pi * 50.0 * np.arange(n) / FS)
+    x = error + hum + 1e-6 * rng.standard_normal(n)
+    assert np.sqrt(4 / n) * np.std(x) * 5 > 1e-4  # the broadband rule would not see it
+    assert line_significance(x, 50.0, FS) > 1e3 and line_significance(x, 70.0, FS) < 25
