@@ -5,8 +5,13 @@ The lines of the model's residual on the noise recording that the input lacks
 neighbourhood; the session's one line search, the shared value ``session-lines`` of
 ``sysid.findings.data_quality``, which searches the noise recording first with the model's
 own lines known) and does not explain (``sysid.io.lines.driven`` on the residual after the
-transient: a mode the model lacks peaks in the residual too, coherent with the input), each
-of which must also be present in both sweep residuals.
+transient: a mode the model lacks peaks in the residual too, coherent with the input), that are
+stationary sinusoids there (``sysid.io.line_stationarity.is_stationary``: one phasor over the
+residual's stretches; a mode rung by the drive's distortion products or by ambient noise peaks there
+too, undriven by the linear input, but as a narrowband random process whose phase wanders at the
+mode's bandwidth), each of which must also be present in both sweep residuals (beyond five
+standard errors against the background beside the line, stretch by stretch:
+``sysid.io.line_stationarity.line_significance``).
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.thresholds import SKIP_S
-from ..io.lines import LINE_RATIO, driven, fit_sinusoids
+from ..io.line_stationarity import is_stationary, line_significance
+from ..io.lines import LINE_RATIO, driven, quiet_samples
 from . import DiagnosisContext, finding, noise_prediction, uses
 from .data_quality import session_line_search  # noqa: F401  (the provider of the shared value session-lines)
 from .dynamics import factor_residual, has_series_factor, within_resonance
@@ -23,11 +29,14 @@ __all__ = ["disturbance_finding"]
 
 
 def _in_sweep(residual: np.ndarray, frequency: float, fs: float) -> bool:
-    """Is a sinusoid at frequency in the residual, beyond 5 standard errors of its amplitude?"""
-    fitted = fit_sinusoids(residual, [frequency], fs)
-    level = np.sqrt(np.mean(fitted**2))
-    # Four columns per line: the fitted RMS of pure noise is about sigma sqrt(4 / N).
-    return level > 5.0 * np.std(residual - fitted) * np.sqrt(4.0 / residual.size)
+    """Is a sinusoid at frequency (Hz) in a sweep's residual, beyond 5 standard errors of its amplitude?
+
+    The standard error from the background beside the line in each stretch of the sweep
+    (``sysid.io.line_stationarity.line_significance``): the residual's error is where the sweep and its
+    harmonics are, so its broadband rms (a distorted drive's harmonics at -15 dB) would bury a hum the
+    quiet stretches show.
+    """
+    return line_significance(residual, frequency, fs) > 5.0**2
 
 
 @uses("noise-prediction", "session-lines")
@@ -40,7 +49,12 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     # The noise recording's lines, searched first (with the model's lines known) by the session's search.
     peaks = [line for line in ctx.value("session-lines").found[0] if not within_resonance(ctx, line[0])]
     # A mode the model lacks or misplaces rings like a line in the residual, but the input explains it.
-    candidates = [line for line, by_input in zip(peaks, driven(residual, u, ctx.fs, [p[0] for p in peaks])) if not by_input]
+    undriven = [line for line, by_input in zip(peaks, driven(residual, u, ctx.fs, [p[0] for p in peaks])) if not by_input]
+    # A hum keeps one amplitude and phase throughout; a mode rung by the drive's distortion (u^2 of the noise
+    # through a Q-30 mode) or by ambient noise is not driven by the linear input either, but its phase wanders
+    # at the mode's bandwidth. Fitted where the ear is not loud, as the line search does (clipped stretches).
+    quiet = quiet_samples(ctx.noise.y)[body_start:]
+    candidates = [line for line in undriven if is_stationary(residual, line[0], ctx.fs, quiet)]
     first = int(round(SKIP_S * ctx.fs))
     sweep_residuals = [s["residual"] for s in ctx.comparison.per_sweep]
     if candidates and has_series_factor(ctx):
@@ -65,4 +79,4 @@ def disturbance_finding(ctx: DiagnosisContext) -> dict:
     return finding("periodic-disturbance", significant, score, {"frequencies_hz": frequencies, "levels_fs": levels},
                    explanation,
                    "refine --add periodic-disturbance:frequencies_hz=" + "/".join(f"{f:g}" for f in frequencies)
-                   if lines else "none", {"candidates": len(candidates)})
+                   if lines else "none", {"candidates": len(candidates), "not_stationary": len(undriven) - len(candidates)})
