@@ -41,12 +41,12 @@ import scipy.signal
 
 from ..core import lti
 from ..core.errors import IdentificationError
-from ..core.model import Model
+from ..core.model import MAX_COEFFICIENT, Model
 from ..core.structures import factor_coefficients
 from ..core.thresholds import IDENTIFICATION_BAND
 from ..io.recordings import Recording
 from .input_nonlinearity import tanh_map
-from .masked_output_error import refine_masked
+from .masked_output_error import refine_masked, refine_masked_inputs
 from .output_error import block_data, refine_output_error
 
 __all__ = ["HammersteinFit", "fit_hammerstein", "polynomial_degree", "MAX_DEGREE"]
@@ -184,6 +184,32 @@ def _masked_core(core, v: np.ndarray, y: np.ndarray, keep: np.ndarray, start: in
     return A, B, C, np.atleast_2d(D)
 
 
+def _relaxed_core(core, u: np.ndarray, y: np.ndarray, keep: np.ndarray, start: int, delay: int, feedthrough: bool,
+                  degree: int):
+    """The core's poles refined over the kept samples after ``start`` with a numerator of their own for each
+    power (u / peak)^k, k = 1..``degree`` (``refine_masked_inputs``: Bai's relaxation, linear in the
+    numerators), and the numerator of the rank-one fit of those (the Hammerstein structure: one core, the
+    powers weighted by the map); balanced, or None where that fails. The start of the masked alternation:
+    the map and the core move together there, each held while the other moves, so from a core fitted
+    without the map (the DC the map makes sets the path's low-frequency gain) the alternation crawls."""
+    peak = float(np.max(np.abs(u[start:]))) or 1.0
+    x = u / peak
+    powers = np.stack([x**k for k in range(1, degree + 1)], axis=1)
+    delayed = np.concatenate((np.zeros((min(delay, x.size), degree)), powers[: max(x.size - delay, 0)]))
+    counted = np.asarray(keep, bool).copy()
+    counted[:start] = False
+    try:
+        A, B, C, D = refine_masked_inputs(core[0], delayed, y, counted, feedthrough=feedthrough)
+        numerators = np.column_stack((C, D)) if feedthrough else C
+        left, values, right = np.linalg.svd(numerators, full_matrices=False)
+        first = values[0] * left[0, 0] * right[0]
+        n = A.shape[0]
+        realised = lti.balanced_realisation(A, B, first[None, :n], np.array([[first[n] if feedthrough else 0.0]]))
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    return realised[0], realised[1], realised[2], np.atleast_2d(realised[3])
+
+
 def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
                     core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
                     max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS, prefilter: dict | None = None,
@@ -220,13 +246,22 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
     m = min(noise.u.size, start + int(round((core_seconds or seconds) * noise.fs)))
     core_u, core_y = filtered[start:m], noise.y[start:m]
     core = (model.A, model.B, model.C, model.D)
+    if keep is not None:
+        relaxed = _relaxed_core(core, filtered[:m], noise.y[:m], keep[:m], start, model.delay, bool(model.D[0, 0]),
+                                min(max_degree, 3))
+        if relaxed is not None and np.max(np.abs(np.linalg.eigvals(relaxed[0]))) < 1.0:
+            core = relaxed
     history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None
     for done in range(1, rounds + 1):
         # 1. The map with the core held (its gain moved into the core).
         linear = _linear(model, core)
         fits = _polynomial_fits(stretch, linear, max_degree)
         if kind == "polynomial":
-            degree = polynomial_degree(fits, stretch.effective)
+            # Only degrees whose coefficients in FS units a model can hold (a degree-7 term on a drive of
+            # 0.06 FS peak is c_7 / 0.06^6: past MAX_COEFFICIENT for any c_7 above 5).
+            held = [f for f in fits if np.all(np.isfinite(f[1])) and
+                    max(abs(ck) / stretch.peak ** k for k, ck in enumerate(f[1])) <= MAX_COEFFICIENT]
+            degree = polynomial_degree(held or fits[:1], stretch.effective)
             _, c, gain, error = fits[degree - 1]
             coefficients = [float(ck / stretch.peak ** (k - 1)) for k, ck in enumerate(c, start=1)]
             parameters = degree - 1
