@@ -8,7 +8,8 @@ builder of each effect. The model chain is [input polynomial] -> [z^-delay] -> (
   delayed input.
 - ``add_input_nonlinearity``: a Hammerstein input map (a polynomial of the degree the data
   ask for, or a tanh saturation), refined together with the core by output error on the
-  noise recording (``sysid.estimation.hammerstein``), and, when that leaves the model above
+  noise recording (``sysid.estimation.hammerstein``; over the samples outside the model's excluded
+  stretches only, where the clipping step left some out), and, when that leaves the model above
   the floor, behind a high-pass pre-filter whose corner is fitted with them (Wiener-Hammerstein,
   ``sysid.estimation.wiener_hammerstein``); the core re-identified behind the map when that
   does not reach the floor; then its order chosen again on the compensated problem
