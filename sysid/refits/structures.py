@@ -42,7 +42,7 @@ import scipy.signal
 from ..core.errors import IdentificationError, ModelError
 from ..core.model import Model
 from ..core.structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
-from ..core.thresholds import AT_FLOOR, EIV_MIN_ATTENUATION, RUN_TO_RUN_MIN
+from ..core.thresholds import AT_FLOOR, CLIPPING_PASSES, EIV_MIN_ATTENUATION, RUN_TO_RUN_MIN
 from ..estimation.delay import delay_totals
 from ..estimation.hammerstein import fit_hammerstein
 from ..estimation.input_nonlinearity import drive_limit
@@ -153,6 +153,28 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # a 20 Hz high-pass: second order at 14 Hz, 55x the floor).
         best = min(statics if wiener else trials, key=lambda t: compare(t, sweeps).rms)
         fresh = []
+        # Where the noise recording has excluded stretches, identify reads them filled with the prediction of
+        # the model it starts from (``_prepared``): a core short of the path (identified on the clipped data)
+        # fills them short of the DC and the harmonics the map makes, and is found again. So the fit runs in
+        # passes, as the clipping step's own refit does (EM for missing data: each pass fills with the best
+        # model behind the map so far), until one no longer lowers the validation error or reaches the floor.
+        passes = CLIPPING_PASSES if not keep.all() else 1
+        for _ in range(passes):
+            found = fresh_behind(best)
+            fresh += found
+            if not found:
+                break
+            top = min(found, key=lambda t: compare(t, sweeps).rms)
+            if compare(top, sweeps).ratio <= AT_FLOOR or (top is not best and compare(top, sweeps).rms >=
+                                                           (1.0 - RUN_TO_RUN_MIN) * compare(best, sweeps).rms):
+                break
+            best = top
+        if not fresh:
+            raise IdentificationError("no stable core behind the input map")
+        return min(fresh, key=lambda t: compare(t, sweeps).rms)
+
+    def fresh_behind(best):
+        fresh = []
         for input_map, delay in ((_plain_input(best), best.delay), (best.apply_input_nonlinearity, 0)):
             try:
                 core = _reidentify(best, noise, sweeps, input_map, model.disturbance_frequencies, options,
@@ -166,9 +188,7 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
             if wiener and behind and _above_floor(behind, sweeps):
                 fresh += _wiener_hammerstein(start, recording, sweeps, behind, params, core_seconds, transient_s, joint,
                                              keep)
-        if not fresh:
-            raise IdentificationError("no stable core behind the input map")
-        return min(fresh, key=lambda t: compare(t, sweeps).rms)
+        return fresh
 
     best = _refit(sweeps, trials, reidentify)
     unmasked = _unmasked_delay(best, noise, sweeps, options, transient_s)
