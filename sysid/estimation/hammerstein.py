@@ -13,9 +13,19 @@ core by the output-error refinement on the raw DFT of (f(u), y)
 (``sysid.estimation.output_error.refine_output_error``), which keeps its order. Each block
 lowers V, so the alternation descends; it stops when a round gains less than 0.1 %.
 
+A recording whose ear channel clipped (the model's ``excluded`` stretches, ``sysid.io.corrections``)
+is fitted on the samples it keeps only (``keep``): the criterion is then the masked output error of
+``sysid.estimation.masked_output_error``, V = sum over kept t of (y_t - L(f(u))_t)^2 with L driven by
+the whole input from the recording's start, over the full band (a band-pass of the ear signal would
+smear each gap's unknown samples over the 20 Hz edge's settling time, about the spacing of the gaps
+on a path whose DC gain clips the channel), the map by least squares over the kept rows and the core
+by ``refine_masked``. The gaps are not filled: a fill by the model being fitted (EM for missing
+data) pulls the fit towards itself, and a fill by the linear model before the map holds the very
+harmonics and DC the map is there to explain.
+
 The polynomial's degree is chosen by Rissanen's minimum description length on the output
 error, N ln V_K + K ln N, with N the band's effective number of independent samples (the
-band-passed stretch's samples times twice its bandwidth over fs). The gain between f and L is
+band-passed stretch's samples times twice its bandwidth over fs; the kept samples on the full band). The gain between f and L is
 not identifiable: f is normalised to unit small-signal slope (c_1 = 1; g = cosh^2(o/s)) and the
 core carries the gain.
 """
@@ -29,12 +39,14 @@ import numpy as np
 import scipy.optimize
 import scipy.signal
 
+from ..core import lti
 from ..core.errors import IdentificationError
-from ..core.model import Model
+from ..core.model import MAX_COEFFICIENT, Model
 from ..core.structures import factor_coefficients
 from ..core.thresholds import IDENTIFICATION_BAND
 from ..io.recordings import Recording
 from .input_nonlinearity import tanh_map
+from .masked_output_error import refine_masked, refine_masked_inputs
 from .output_error import block_data, refine_output_error
 
 __all__ = ["HammersteinFit", "fit_hammerstein", "polynomial_degree", "MAX_DEGREE"]
@@ -75,18 +87,22 @@ class _Stretch:
     """The noise recording's stretch the time-domain steps read: its input from the recording's start (the
     simulation starts from rest where the recording does, so the plant's state at the stretch is the
     recorded one: a slow mode started from rest at the stretch would misfit for its whole decay), the
-    band-passed ear signal over the stretch, the band filter."""
+    band-passed ear signal over the stretch, the band filter; with ``keep`` (True where the ear signal
+    counts), the kept samples of the stretch on the full band instead (see the module docstring)."""
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, fs: float, band, start: int):
+    def __init__(self, u: np.ndarray, y: np.ndarray, fs: float, band, start: int, keep: np.ndarray | None = None):
         self.u, self.fs = u, fs
-        self.band = scipy.signal.butter(4, band, "bandpass", fs=fs, output="sos")
         self.first = max(start, int(round(_SETTLE_S * fs)))
+        self.rows = None if keep is None else np.asarray(keep[self.first:u.size], bool)
+        self.band = None if keep is not None else scipy.signal.butter(4, band, "bandpass", fs=fs, output="sos")
         self.y = self.filtered(y)
         self.peak = float(np.max(np.abs(u))) or 1.0
         # Samples of a band-limited signal carry 2 B / fs independent values each (Nyquist).
-        self.effective = max(self.y.size * 2.0 * (band[1] - band[0]) / fs, 1.0)
+        self.effective = max(self.y.size * (1.0 if keep is not None else 2.0 * (band[1] - band[0]) / fs), 1.0)
 
     def filtered(self, x: np.ndarray) -> np.ndarray:
+        if self.rows is not None:
+            return x[self.first:][self.rows]
         return scipy.signal.sosfilt(self.band, x)[self.first:]
 
     def through(self, linear: Model, v: np.ndarray) -> np.ndarray:
@@ -154,9 +170,50 @@ def _tanh_starts(fits, peak: float):
     return starts
 
 
+def _masked_core(core, v: np.ndarray, y: np.ndarray, keep: np.ndarray, start: int, delay: int, feedthrough: bool):
+    """The core's poles refined by output error over the kept samples after ``start`` of (v delayed, y)
+    (``sysid.estimation.masked_output_error``), balanced; None where that fails."""
+    delayed = np.concatenate((np.zeros(min(delay, v.size)), v[: max(v.size - delay, 0)]))
+    counted = np.asarray(keep, bool).copy()
+    counted[:start] = False
+    try:
+        fit = refine_masked(core[0], delayed, y, counted, feedthrough=feedthrough)
+        A, B, C, D = lti.balanced_realisation(fit.A, fit.B, fit.C, fit.D)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    return A, B, C, np.atleast_2d(D)
+
+
+def _relaxed_core(core, u: np.ndarray, y: np.ndarray, keep: np.ndarray, start: int, delay: int, feedthrough: bool,
+                  degree: int):
+    """The core's poles refined over the kept samples after ``start`` with a numerator of their own for each
+    power (u / peak)^k, k = 1..``degree`` (``refine_masked_inputs``: Bai's relaxation, linear in the
+    numerators), and the numerator of the rank-one fit of those (the Hammerstein structure: one core, the
+    powers weighted by the map); balanced, or None where that fails. The start of the masked alternation:
+    the map and the core move together there, each held while the other moves, so from a core fitted
+    without the map (the DC the map makes sets the path's low-frequency gain) the alternation crawls."""
+    peak = float(np.max(np.abs(u[start:]))) or 1.0
+    x = u / peak
+    powers = np.stack([x**k for k in range(1, degree + 1)], axis=1)
+    delayed = np.concatenate((np.zeros((min(delay, x.size), degree)), powers[: max(x.size - delay, 0)]))
+    counted = np.asarray(keep, bool).copy()
+    counted[:start] = False
+    try:
+        A, B, C, D = refine_masked_inputs(core[0], delayed, y, counted, feedthrough=feedthrough)
+        numerators = np.column_stack((C, D)) if feedthrough else C
+        left, values, right = np.linalg.svd(numerators, full_matrices=False)
+        first = values[0] * left[0, 0] * right[0]
+        n = A.shape[0]
+        realised = lti.balanced_realisation(A, B, first[None, :n], np.array([[first[n] if feedthrough else 0.0]]))
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    return realised[0], realised[1], realised[2], np.atleast_2d(realised[3])
+
+
 def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
                     core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
-                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS, prefilter: dict | None = None) -> HammersteinFit:
+                    max_degree: int = MAX_DEGREE, rounds: int = _ROUNDS, prefilter: dict | None = None,
+                    keep: np.ndarray | None = None) -> HammersteinFit:
     """The input map of ``kind`` ("polynomial" or "tanh") and the core of ``model`` refined together on
     ``noise`` (the recording as the core sees it: the ear signal without disturbance or offset, the input
     raw) after its first ``transient_s``; see the module docstring. The map is fitted on the first
@@ -165,7 +222,9 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
     modes needs the longer record). ``model``'s own input map is replaced; its delay is kept, and its core
     is the start. A ``prefilter`` (the model form's, ``sysid.core.model``) is held in front of the map
     (a Wiener-Hammerstein model): the map and the core are fitted on the input it filters from the
-    recording's start, and the fitted form carries it.
+    recording's start, and the fitted form carries it. ``keep`` (one flag per sample of ``noise``, True
+    where its ear signal counts; None or all True: every sample) leaves the excluded samples out of both
+    steps (the masked criterion of the module docstring).
     """
     if kind not in ("polynomial", "tanh"):
         raise ValueError(f"kind must be polynomial or tanh; found {kind!r}")
@@ -177,19 +236,32 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
     filtered = noise.u if prefilter is None else scipy.signal.lfilter(
         *factor_coefficients(prefilter["kind"], prefilter, noise.fs), noise.u)
     u, y = filtered[:n], noise.y[:n]
-    stretch = _Stretch(u, y, noise.fs, band, start)
+    if keep is not None and np.all(keep):
+        keep = None
+    if keep is not None and np.count_nonzero(keep[start:n]) < 10 * (model.order + max_degree + 1):
+        raise IdentificationError("too few samples of the noise recording outside its excluded stretches")
+    stretch = _Stretch(u, y, noise.fs, band, start, keep)
     cost_before = float(np.mean((stretch.y - stretch.through(_linear(model), model.apply_input_nonlinearity(
         noise.u[:n]))) ** 2))
     m = min(noise.u.size, start + int(round((core_seconds or seconds) * noise.fs)))
     core_u, core_y = filtered[start:m], noise.y[start:m]
     core = (model.A, model.B, model.C, model.D)
+    if keep is not None:
+        relaxed = _relaxed_core(core, filtered[:m], noise.y[:m], keep[:m], start, model.delay, bool(model.D[0, 0]),
+                                min(max_degree, 3))
+        if relaxed is not None and np.max(np.abs(np.linalg.eigvals(relaxed[0]))) < 1.0:
+            core = relaxed
     history, coefficients, form, parameters, done, theta = [], None, None, 0, 0, None
     for done in range(1, rounds + 1):
         # 1. The map with the core held (its gain moved into the core).
         linear = _linear(model, core)
         fits = _polynomial_fits(stretch, linear, max_degree)
         if kind == "polynomial":
-            degree = polynomial_degree(fits, stretch.effective)
+            # Only degrees whose coefficients in FS units a model can hold (a degree-7 term on a drive of
+            # 0.06 FS peak is c_7 / 0.06^6: past MAX_COEFFICIENT for any c_7 above 5).
+            held = [f for f in fits if np.all(np.isfinite(f[1])) and
+                    max(abs(ck) / stretch.peak ** k for k, ck in enumerate(f[1])) <= MAX_COEFFICIENT]
+            degree = polynomial_degree(held or fits[:1], stretch.effective)
             _, c, gain, error = fits[degree - 1]
             coefficients = [float(ck / stretch.peak ** (k - 1)) for k, ck in enumerate(c, start=1)]
             parameters = degree - 1
@@ -205,11 +277,18 @@ def fit_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", se
             return np.polynomial.polynomial.polyval(x, [0.0, *coefficients])
         A, B, C, D = core
         core = (A, B * gain, C, D * gain)
-        # 2. The core with the map held: output error on the raw DFT of (f(u), y), the order kept.
-        data = block_data(Recording(mapped(core_u), core_y, noise.fs, noise.path), band, None)
-        oe = refine_output_error(*core, data, delay=model.delay, feedthrough=bool(model.D[0, 0]), noise_tolerance=True)
-        if np.max(np.abs(np.linalg.eigvals(oe.A))) < 1.0:
-            core = (oe.A, oe.B, oe.C, oe.D)
+        # 2. The core with the map held: output error on the raw DFT of (f(u), y), the order kept; with
+        # excluded samples, the masked output error over the kept ones.
+        if keep is None:
+            data = block_data(Recording(mapped(core_u), core_y, noise.fs, noise.path), band, None)
+            oe = refine_output_error(*core, data, delay=model.delay, feedthrough=bool(model.D[0, 0]),
+                                     noise_tolerance=True)
+            refined = (oe.A, oe.B, oe.C, oe.D)
+        else:
+            refined = _masked_core(core, mapped(filtered[:m]), noise.y[:m], keep[:m], start, model.delay,
+                                   bool(model.D[0, 0]))
+        if refined is not None and np.max(np.abs(np.linalg.eigvals(refined[0]))) < 1.0:
+            core = refined
         error = float(np.mean((stretch.y - stretch.through(_linear(model, core), mapped(u))) ** 2))
         history.append(error)
         if len(history) > 1 and history[-2] - error < _GAIN * history[-2]:

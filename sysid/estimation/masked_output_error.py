@@ -27,7 +27,7 @@ from threadpoolctl import threadpool_limits
 
 from .output_error import OutputErrorFit
 
-__all__ = ["refine_masked"]
+__all__ = ["refine_masked", "refine_masked_inputs"]
 
 # Largest pole radius a step may reach: a pole on the unit circle is no stable core.
 _RADIUS_BOUND = 1.0 - 1e-9
@@ -51,7 +51,10 @@ def _blocks(poles: np.ndarray) -> tuple[list[int], np.ndarray]:
 
 
 def _block_states(size: int, theta: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """The states (columns) of one block driven by v from rest; see the module docstring."""
+    """The states (columns) of one block driven by v from rest; see the module docstring. A v of several
+    columns (inputs) gives the block's states for each in turn."""
+    if v.ndim == 2:
+        return np.concatenate([_block_states(size, theta, column) for column in v.T], axis=1)
     if size == 1:
         return scipy.signal.sosfilt([[0.0, 1.0, 0.0, 1.0, -theta[0], 0.0]], v)[:, None]
     sigma, omega = theta
@@ -81,15 +84,57 @@ def refine_masked(A, v: np.ndarray, y: np.ndarray, keep: np.ndarray, feedthrough
         return _refine_masked(A, v, y, keep, feedthrough, max_iterations)
 
 
-def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> OutputErrorFit:
+def refine_masked_inputs(A, V: np.ndarray, y: np.ndarray, keep: np.ndarray, feedthrough: bool = False,
+                         max_iterations: int = 20):
+    """(A, B, C, D) of the common poles refined over the ``keep`` samples for several inputs (the columns of
+    V, each with its own numerator: C has a row per input, D an entry per input; A block-diagonal, B the
+    unit input rows), as ``refine_masked`` does for one. A Hammerstein model's powers u, u^2, ... through one
+    core is this with rank-one numerators; fitted free, the poles need no map to start from (the
+    over-parametrised relaxation of Bai, Automatica 34(3), 1998, sec. 3)."""
+    V = np.asarray(V, float)
+    with threadpool_limits(limits=1, user_api="blas"):
+        sizes, theta, c, _ = _refine_masked(A, V if V.ndim == 2 else V[:, None], y, keep, feedthrough,
+                                            max_iterations, full=True)
+    inputs = V.shape[1] if V.ndim == 2 else 1
+    A_out, B_out = _realised(sizes, theta)
+    n = A_out.shape[0]
+    C_out, k = np.zeros((inputs, n)), 0
+    position = 0
+    for size in sizes:
+        for j in range(inputs):
+            C_out[j, k:k + size] = c[position:position + size]
+            position += size
+        k += size
+    D_out = c[position:position + inputs] if feedthrough else np.zeros(inputs)
+    return A_out, B_out, C_out, D_out
+
+
+def _realised(sizes, theta):
+    """(A, B) of the real block-diagonal form of the pole parameters (the module docstring's)."""
+    n = sum(sizes)
+    A_out, B_out = np.zeros((n, n)), np.zeros((n, 1))
+    k = 0
+    for size, block in zip(sizes, _split(sizes, theta)):
+        if size == 1:
+            A_out[k, k] = block[0]
+        else:
+            sigma, omega = block
+            A_out[k:k + 2, k:k + 2] = [[sigma, omega], [-omega, sigma]]
+        B_out[k, 0] = 1.0
+        k += size
+    return A_out, B_out
+
+
+def _refine_masked(A, v, y, keep, feedthrough, max_iterations, full: bool = False):
     v, y, keep = np.asarray(v, float), np.asarray(y, float), np.asarray(keep, bool)
+    inputs = v.shape[1] if v.ndim == 2 else 1
     sizes, theta = _blocks(np.linalg.eigvals(np.asarray(A, float)))
     y_kept = y[keep]
-    tolerance = (theta.size + sum(sizes) + int(feedthrough)) / max(int(np.count_nonzero(keep)), 1)
+    tolerance = (theta.size + inputs * (sum(sizes) + int(feedthrough))) / max(int(np.count_nonzero(keep)), 1)
 
     def evaluate(theta):
         states = [_block_states(s, t, v) for s, t in zip(sizes, _split(sizes, theta))]
-        X = np.concatenate(states + ([v[:, None]] if feedthrough else []), axis=1)[keep]
+        X = np.concatenate(states + ([v if v.ndim == 2 else v[:, None]] if feedthrough else []), axis=1)[keep]
         Q, R = scipy.linalg.qr(X, mode="economic", overwrite_a=True, check_finite=False)
         c = np.linalg.lstsq(R, Q.T @ y_kept, rcond=None)[0]
         residual = y_kept - X @ c
@@ -102,10 +147,10 @@ def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> OutputErrorFit
                 h = _STEP * max(1.0 - _radius(size, block), 1e-6)
                 moved = block.copy()
                 moved[j] += h
-                change = ((_block_states(size, moved, v) - base) / h)[keep] @ c[start:start + size]
+                change = ((_block_states(size, moved, v) - base) / h)[keep] @ c[start:start + size * inputs]
                 columns.append(-(change - Q @ (Q.T @ change)))
                 k += 1
-            start += size
+            start += size * inputs
         return np.stack(columns, axis=1)
 
     cost, residual, c, Q, states = evaluate(theta)
@@ -129,17 +174,10 @@ def _refine_masked(A, v, y, keep, feedthrough, max_iterations) -> OutputErrorFit
             damping *= 10.0
         if not improved or gain < tolerance:
             break
+    if full:
+        return sizes, theta, c, (cost_before, cost, iterations)
+    A_out, B_out = _realised(sizes, theta)
     n = sum(sizes)
-    A_out, B_out = np.zeros((n, n)), np.zeros((n, 1))
-    k = 0
-    for size, block in zip(sizes, _split(sizes, theta)):
-        if size == 1:
-            A_out[k, k] = block[0]
-        else:
-            sigma, omega = block
-            A_out[k:k + 2, k:k + 2] = [[sigma, omega], [-omega, sigma]]
-        B_out[k, 0] = 1.0
-        k += size
     C_out = c[:n][None, :]
     D_out = np.array([[c[n] if feedthrough else 0.0]])
     return OutputErrorFit(A_out, B_out, C_out, D_out, cost_before, cost, iterations)

@@ -53,17 +53,17 @@ def _highpass(corner_hz: float, order: int) -> dict:
 def fit_wiener_hammerstein(model: Model, noise: Recording, kind: str = "polynomial", seconds: float = 2.0,
                            core_seconds: float | None = None, transient_s: float = 0.0, band=IDENTIFICATION_BAND,
                            max_degree: int = MAX_DEGREE, corners_hz=PREFILTER_CORNERS_HZ,
-                           orders=(1, 2)) -> HammersteinFit:
+                           orders=(1, 2), keep: np.ndarray | None = None) -> HammersteinFit:
     """The high-pass pre-filter (corner in ``corners_hz``' span, order in ``orders``), the static map of
     ``kind`` and the core of ``model`` fitted together on ``noise`` (see the module docstring; the arguments
-    as ``fit_hammerstein``'s). The fit's ``form`` carries the pre-filter; its ``parameters`` count the corner.
+    as ``fit_hammerstein``'s, ``keep`` its samples that count). The fit's ``form`` carries the pre-filter; its ``parameters`` count the corner.
     Corners at or above the band's upper edge are left out (a pre-filter there removes the excitation)."""
     corners = [c for c in corners_hz if c < 0.5 * band[1]]
 
     def fit(corner, order, **cheap):
         arguments = {"seconds": seconds, "core_seconds": core_seconds, "max_degree": max_degree, **cheap}
         return fit_hammerstein(model, noise, kind, transient_s=transient_s, band=band,
-                               prefilter=_highpass(corner, order), **arguments)
+                               prefilter=_highpass(corner, order), keep=keep, **arguments)
 
     def cost(corner, order):
         # The search ranks corners: a short stretch, two rounds and a cubic map do that at a fraction of the time.

@@ -69,11 +69,16 @@ def _prepared(model: Model, recording: Recording) -> Recording:
     return Recording(recording.u, y, recording.fs, recording.path, recording.clipped_fraction, recording.dc_offset)
 
 
+def _kept(model: Model, recording: Recording) -> np.ndarray:
+    """True at the samples of the recording (its ear clock corrected) outside the model's excluded stretches."""
+    return ~excluded_mask(corrected(recording, model.clock_ratio), model.excluded)
+
+
 def _transformed(model, recordings, input_map, frequencies) -> list[Recording]:
     """Recordings as the LTI core sees them: data corrections applied, mapped input, ear signal
     without the disturbance and the output offset."""
     prepared = [_prepared(model, r) for r in recordings]
-    kept = [~excluded_mask(r, model.excluded) for r in prepared]
+    kept = [_kept(model, r) for r in recordings]
     return [Recording(input_map(r.u), r.y - model.output_offset - _disturbance(model, r, frequencies, keep), r.fs,
                       r.path) for r, keep in zip(prepared, kept)]
 

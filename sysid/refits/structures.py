@@ -8,7 +8,8 @@ builder of each effect. The model chain is [input polynomial] -> [z^-delay] -> (
   delayed input.
 - ``add_input_nonlinearity``: a Hammerstein input map (a polynomial of the degree the data
   ask for, or a tanh saturation), refined together with the core by output error on the
-  noise recording (``sysid.estimation.hammerstein``), and, when that leaves the model above
+  noise recording (``sysid.estimation.hammerstein``; over the samples outside the model's excluded
+  stretches only, where the clipping step left some out), and, when that leaves the model above
   the floor, behind a high-pass pre-filter whose corner is fitted with them (Wiener-Hammerstein,
   ``sysid.estimation.wiener_hammerstein``); the core re-identified behind the map when that
   does not reach the floor; then its order chosen again on the compensated problem
@@ -41,7 +42,7 @@ import scipy.signal
 from ..core.errors import IdentificationError, ModelError
 from ..core.model import Model
 from ..core.structures import factor_coefficients, factor_response, mode_block, series, tf_to_statespace, with_states
-from ..core.thresholds import AT_FLOOR, EIV_MIN_ATTENUATION, RUN_TO_RUN_MIN
+from ..core.thresholds import AT_FLOOR, CLIPPING_PASSES, EIV_MIN_ATTENUATION, RUN_TO_RUN_MIN
 from ..estimation.delay import delay_totals
 from ..estimation.hammerstein import fit_hammerstein
 from ..estimation.input_nonlinearity import drive_limit
@@ -51,8 +52,8 @@ from ..findings.context import detector_context
 from ..io.recordings import Recording
 from ..estimation.output_error import BlockData, refine_output_error
 from ..validation.compare import START_Q, compare, worst_bands
-from .machinery import (REFIT_OPTIONS, _core, _core_body, _disturbance, _output_error_data, _plain_input, _prepared,
-                        _refit, _reidentify, _shift, _unmasked_delay, _warm, _with)
+from .machinery import (REFIT_OPTIONS, _core, _core_body, _disturbance, _kept, _output_error_data, _plain_input,
+                        _prepared, _refit, _reidentify, _shift, _unmasked_delay, _warm, _with)
 from .nonlinear_order import fewest_states
 
 # The noise recording's stretch (s) the Hammerstein refinement fits the map on (the core: the refit's
@@ -100,6 +101,10 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     bound on what the plant holds once the map takes the harmonics.
     """
     recording = _raw_recording(model, noise)
+    # The clipped stretches the model leaves out (its ``excluded``, the clipping step's) stay out of the map's
+    # and the core's fit: the fill of ``_prepared`` is the linear model's, without the harmonics and the DC the
+    # map makes (the seed's FB path, DC gain 738 against 23.5 in band: u^2 clips the ear channel).
+    keep = _kept(model, noise)
     shapes = ("polynomial", "tanh") if params.get("shape", "auto") == "auto" else (params["shape"],)
     core_seconds = (options or REFIT_OPTIONS).refine_seconds
 
@@ -109,7 +114,7 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         try:
             fit = fit_hammerstein(start, recording, shape, min(core_seconds, HAMMERSTEIN_SECONDS), core_seconds,
                                   transient_s, max_degree=params["degree"],
-                                  prefilter=(start.input_nonlinearity_form or {}).get("prefilter"))
+                                  prefilter=(start.input_nonlinearity_form or {}).get("prefilter"), keep=keep)
             return _with(start, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
                          input_nonlinearity_form=fit.form)
         except (IdentificationError, ModelError):
@@ -136,7 +141,8 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
     # pre-filter yet: a second refinement refits the one it has).
     wiener = _above_floor(statics, sweeps) and not (model.input_nonlinearity_form or {}).get("prefilter")
     if wiener:
-        trials += _wiener_hammerstein(model, recording, sweeps, statics, params, core_seconds, transient_s, joint)
+        trials += _wiener_hammerstein(model, recording, sweeps, statics, params, core_seconds, transient_s, joint,
+                                      keep)
 
     def reidentify():
         # Behind the map and the model's delay (identify adds what latency it reads beyond), and behind the
@@ -146,6 +152,28 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # found from a core short of the plant's order is off (random helmet 11 FB, 3 states for 6, behind
         # a 20 Hz high-pass: second order at 14 Hz, 55x the floor).
         best = min(statics if wiener else trials, key=lambda t: compare(t, sweeps).rms)
+        fresh = []
+        # Where the noise recording has excluded stretches, identify reads them filled with the prediction of
+        # the model it starts from (``_prepared``): a core short of the path (identified on the clipped data)
+        # fills them short of the DC and the harmonics the map makes, and is found again. So the fit runs in
+        # passes, as the clipping step's own refit does (EM for missing data: each pass fills with the best
+        # model behind the map so far), until one no longer lowers the validation error or reaches the floor.
+        passes = CLIPPING_PASSES if not keep.all() else 1
+        for _ in range(passes):
+            found = fresh_behind(best)
+            fresh += found
+            if not found:
+                break
+            top = min(found, key=lambda t: compare(t, sweeps).rms)
+            if compare(top, sweeps).ratio <= AT_FLOOR or (top is not best and compare(top, sweeps).rms >=
+                                                           (1.0 - RUN_TO_RUN_MIN) * compare(best, sweeps).rms):
+                break
+            best = top
+        if not fresh:
+            raise IdentificationError("no stable core behind the input map")
+        return min(fresh, key=lambda t: compare(t, sweeps).rms)
+
+    def fresh_behind(best):
         fresh = []
         for input_map, delay in ((_plain_input(best), best.delay), (best.apply_input_nonlinearity, 0)):
             try:
@@ -158,10 +186,9 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
             behind = [t for t in (start, *(joint(start, shape) for shape in shapes)) if t is not None and t.stable]
             fresh += behind
             if wiener and behind and _above_floor(behind, sweeps):
-                fresh += _wiener_hammerstein(start, recording, sweeps, behind, params, core_seconds, transient_s, joint)
-        if not fresh:
-            raise IdentificationError("no stable core behind the input map")
-        return min(fresh, key=lambda t: compare(t, sweeps).rms)
+                fresh += _wiener_hammerstein(start, recording, sweeps, behind, params, core_seconds, transient_s, joint,
+                                             keep)
+        return fresh
 
     best = _refit(sweeps, trials, reidentify)
     unmasked = _unmasked_delay(best, noise, sweeps, options, transient_s)
@@ -169,7 +196,7 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
             (unmasked.input_nonlinearity_form or {}).get("prefilter"):
         # A core identified anew behind another delay: the corner found for the old one is searched again.
         unmasked = min([unmasked, *_wiener_hammerstein(unmasked, recording, sweeps, [unmasked], params, core_seconds,
-                                                        transient_s, joint)], key=lambda t: compare(t, sweeps).rms)
+                                                        transient_s, joint, keep)], key=lambda t: compare(t, sweeps).rms)
     # The order the compensated data hold: the order read on the nonlinear data took harmonics for dynamics.
     shape = "tanh" if (unmasked.input_nonlinearity_form or {}).get("kind") == "tanh" else "polynomial"
     best, _ = fewest_states(unmasked, sweeps, lambda start: joint(start, shape))
@@ -186,7 +213,7 @@ def _above_floor(trials, sweeps) -> bool:
     return min(compare(t, sweeps).ratio for t in trials) > AT_FLOOR
 
 
-def _wiener_hammerstein(model, recording, sweeps, trials, params, core_seconds, transient_s, joint) -> list:
+def _wiener_hammerstein(model, recording, sweeps, trials, params, core_seconds, transient_s, joint, keep=None) -> list:
     """The Wiener-Hammerstein trials (``sysid.estimation.wiener_hammerstein``: a high-pass in front of the map,
     its corner fitted with the map and ``model``'s core; the saturation refitted behind the pre-filter found),
     each kept only when it lowers the validation rms of the static ``trials`` by more than its run-to-run
@@ -194,7 +221,7 @@ def _wiener_hammerstein(model, recording, sweeps, trials, params, core_seconds, 
     static = min((compare(t, sweeps) for t in trials), key=lambda c: c.rms)
     try:
         fit = fit_wiener_hammerstein(model, recording, "polynomial", min(core_seconds, HAMMERSTEIN_SECONDS),
-                                     core_seconds, transient_s, max_degree=params["degree"])
+                                     core_seconds, transient_s, max_degree=params["degree"], keep=keep)
         found = _with(model, (fit.A, fit.B, fit.C, fit.D), input_nonlinearity=fit.coefficients,
                       input_nonlinearity_form=fit.form)
     except (IdentificationError, ModelError):
@@ -214,7 +241,8 @@ def _raw_recording(model, noise) -> Recording:
     """The noise recording as the model's input map sees it: the raw input, the ear signal without the model's
     disturbance and output offset (``sysid.refits.machinery._core_body`` before the map, the transient kept)."""
     prepared = _prepared(model, noise)
-    y = prepared.y - model.output_offset - _disturbance(model, prepared, model.disturbance_frequencies)
+    y = prepared.y - model.output_offset - _disturbance(model, prepared, model.disturbance_frequencies,
+                                                        _kept(model, noise))
     return Recording(prepared.u, y, prepared.fs, prepared.path)
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sysid.core import lti
-from sysid.estimation.masked_output_error import refine_masked
+from sysid.estimation.masked_output_error import refine_masked, refine_masked_inputs
 
 FS = 44100.0
 
@@ -69,3 +69,24 @@ def test_feedthrough_and_a_real_pole_only():
     fit = refine_masked(np.array([[0.7]]), v, y, keep, feedthrough=True)
     assert fit.A[0, 0] == pytest.approx(0.8, abs=1e-4)
     assert fit.D[0, 0] == pytest.approx(0.3, abs=1e-4)
+
+
+def test_common_poles_with_a_numerator_per_input():
+    # A Hammerstein path v + 0.5 v^2 through the plant POLES: two inputs, one core, numerators C and 0.5 C;
+    # the loudest 30 % of the ear samples missing. Fitted free, each input's numerator and the common poles
+    # come back, and the numerators are the rank-one pair the map makes.
+    rng = np.random.default_rng(2)
+    A, B, C, D = plant(POLES)
+    v = 0.1 * rng.standard_normal(60000)
+    clean = lti.simulate(A, B, C, D, v + 0.5 * v**2)
+    keep = np.abs(clean) < np.quantile(np.abs(clean), 0.7)
+    y = np.where(keep, clean + 1e-3 * np.std(clean) * rng.standard_normal(v.size), 0.0)
+    start = lti.real_block_diagonal(np.array(POLES) * np.array([0.9999, 0.9999, 0.9, 1.002, 1.002]))
+    A_fit, B_fit, C_fit, D_fit = refine_masked_inputs(start, np.stack([v, v**2], axis=1), y, keep)
+    assert C_fit.shape == (2, 5) and D_fit.shape == (2,)
+    found = np.sort_complex(np.linalg.eigvals(A_fit))
+    assert np.allclose(found, np.sort_complex(np.array(POLES)), atol=2e-3)
+    assert np.allclose(C_fit[1], 0.5 * C_fit[0], atol=1e-3 * np.max(np.abs(C_fit[0])))
+    predicted = lti.simulate(A_fit, B_fit, C_fit[:1], np.zeros((1, 1)), v) + \
+        lti.simulate(A_fit, B_fit, C_fit[1:], np.zeros((1, 1)), v**2)
+    assert np.sqrt(np.mean((predicted - clean)[~keep] ** 2)) < 1e-2 * np.std(clean)
