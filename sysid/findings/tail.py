@@ -204,9 +204,7 @@ def estimate_ratio(ctx: DiagnosisContext, delay: int) -> float:
     if delay == model.delay:
         taps = ctx.value("long-response").taps
     else:
-        later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D, delay=delay,
-                      input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
-        taps = long_response(later, ctx.noise, ctx.transient_s).taps
+        taps = long_response(_at_delay(model, delay), ctx.noise, ctx.transient_s).taps
     spectra = tail_spectra(model, ctx.sweeps, ctx.comparison)
     responses = [np.polyval(taps[::-1], np.exp(-2j * np.pi * s.frequencies / ctx.fs))
                  * np.exp(-2j * np.pi * s.frequencies * delay / ctx.fs) for s in spectra]
@@ -363,14 +361,18 @@ def ladder_text(table: list, order: int, needed: int | None = None) -> str:
     return ", ".join(shown)
 
 
-@uses("long-response")
+def _at_delay(model: Model, total_delay: int) -> Model:
+    """``model``'s core, input map and offset behind ``total_delay`` samples: what a long estimate is made behind."""
+    return Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D, delay=total_delay,
+                 input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
+
+
 def _ladder_behind(ctx: DiagnosisContext, spectra: list[SweepSpectrum], total_delay: int) -> TruncationLadder:
     """The truncation ladder of the noise recording's long estimate behind ``total_delay`` samples."""
     model = ctx.model
-    later = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D, delay=total_delay,
-                  input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
-    return truncation_ladder(long_response(later, ctx.noise, ctx.transient_s).taps, ctx.fs, total_delay, spectra,
-                             ctx.comparison.noise_floor, model, start=max(model.order, 2))
+    taps = long_response(_at_delay(model, total_delay), ctx.noise, ctx.transient_s).taps
+    return truncation_ladder(taps, ctx.fs, total_delay, spectra, ctx.comparison.noise_floor, model,
+                             start=max(model.order, 2))
 
 
 def _states_needed(ladder: TruncationLadder) -> tuple[float, float]:
@@ -379,6 +381,7 @@ def _states_needed(ladder: TruncationLadder) -> tuple[float, float]:
     return needed, min(ladder.ratios)
 
 
+@uses("long-response")
 def tail_finding(ctx: DiagnosisContext):
     model = ctx.model
     cap = model.identification.get("max_order")
@@ -413,10 +416,7 @@ def tail_finding(ctx: DiagnosisContext):
     if model.delay > 0:
         # A delay the model holds may cut into a slow onset (a capped model fits it better a few samples later):
         # the response from the input on is judged instead when its estimate validates materially better.
-        front = Model(path=model.path, fs=model.fs, A=model.A, B=model.B, C=model.C, D=model.D,
-                      input_nonlinearity=model.input_nonlinearity, output_offset=model.output_offset)
-        whole = truncation_ladder(long_response(front, ctx.noise, ctx.transient_s).taps, fs, 0, spectra,
-                                  ctx.comparison.noise_floor, model, start=max(model.order, 2))
+        whole = _ladder_behind(ctx, spectra, 0)
         if TAIL_LADDER_SLACK * whole.fir_ratio < ladder.fir_ratio:
             ladder = whole
     chosen = ladder.needed if ladder.needed is not None else ladder.best
