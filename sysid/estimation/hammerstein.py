@@ -170,12 +170,20 @@ def _tanh_starts(fits, peak: float):
     return starts
 
 
+def _delayed_and_counted(v: np.ndarray, keep: np.ndarray, start: int, delay: int) -> tuple[np.ndarray, np.ndarray]:
+    """(v delayed by ``delay`` samples along its first axis, from rest; the kept samples after ``start``): the
+    masked criterion's input and the samples it counts."""
+    shift = min(delay, v.shape[0])
+    delayed = np.concatenate((np.zeros((shift, *v.shape[1:])), v[: v.shape[0] - shift]))
+    counted = np.asarray(keep, bool).copy()
+    counted[:start] = False
+    return delayed, counted
+
+
 def _masked_core(core, v: np.ndarray, y: np.ndarray, keep: np.ndarray, start: int, delay: int, feedthrough: bool):
     """The core's poles refined by output error over the kept samples after ``start`` of (v delayed, y)
     (``sysid.estimation.masked_output_error``), balanced; None where that fails."""
-    delayed = np.concatenate((np.zeros(min(delay, v.size)), v[: max(v.size - delay, 0)]))
-    counted = np.asarray(keep, bool).copy()
-    counted[:start] = False
+    delayed, counted = _delayed_and_counted(v, keep, start, delay)
     try:
         fit = refine_masked(core[0], delayed, y, counted, feedthrough=feedthrough)
         A, B, C, D = lti.balanced_realisation(fit.A, fit.B, fit.C, fit.D)
@@ -195,9 +203,7 @@ def _relaxed_core(core, u: np.ndarray, y: np.ndarray, keep: np.ndarray, start: i
     peak = float(np.max(np.abs(u[start:]))) or 1.0
     x = u / peak
     powers = np.stack([x**k for k in range(1, degree + 1)], axis=1)
-    delayed = np.concatenate((np.zeros((min(delay, x.size), degree)), powers[: max(x.size - delay, 0)]))
-    counted = np.asarray(keep, bool).copy()
-    counted[:start] = False
+    delayed, counted = _delayed_and_counted(powers, keep, start, delay)
     try:
         A, B, C, D = refine_masked_inputs(core[0], delayed, y, counted, feedthrough=feedthrough)
         numerators = np.column_stack((C, D)) if feedthrough else C

@@ -152,7 +152,8 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # found from a core short of the plant's order is off (random helmet 11 FB, 3 states for 6, behind
         # a 20 Hz high-pass: second order at 14 Hz, 55x the floor).
         best = min(statics if wiener else trials, key=lambda t: compare(t, sweeps).rms)
-        fresh = []
+        best_rms = compare(best, sweeps).rms
+        fresh = []  # (validation, core) of every core found behind the map
         # Where the noise recording has excluded stretches, identify reads them filled with the prediction of
         # the model it starts from (``_prepared``): a core short of the path (identified on the clipped data)
         # fills them short of the DC and the harmonics the map makes, and is found again. So the fit runs in
@@ -160,18 +161,17 @@ def add_input_nonlinearity(model, noise, sweeps, params, options, transient_s):
         # model behind the map so far), until one no longer lowers the validation error or reaches the floor.
         passes = CLIPPING_PASSES if not keep.all() else 1
         for _ in range(passes):
-            found = fresh_behind(best)
+            found = [(compare(t, sweeps), t) for t in fresh_behind(best)]
             fresh += found
             if not found:
                 break
-            top = min(found, key=lambda t: compare(t, sweeps).rms)
-            if compare(top, sweeps).ratio <= AT_FLOOR or (top is not best and compare(top, sweeps).rms >=
-                                                           (1.0 - RUN_TO_RUN_MIN) * compare(best, sweeps).rms):
+            top_validation, top = min(found, key=lambda f: f[0].rms)
+            if top_validation.ratio <= AT_FLOOR or top_validation.rms >= (1.0 - RUN_TO_RUN_MIN) * best_rms:
                 break
-            best = top
+            best, best_rms = top, top_validation.rms
         if not fresh:
             raise IdentificationError("no stable core behind the input map")
-        return min(fresh, key=lambda t: compare(t, sweeps).rms)
+        return min(fresh, key=lambda f: f[0].rms)[1]
 
     def fresh_behind(best):
         fresh = []
