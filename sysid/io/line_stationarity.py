@@ -97,11 +97,10 @@ def segment_phasors(x: np.ndarray, frequency: float, fs: float, keep: np.ndarray
     omega = 2 * np.pi * frequency / fs  # rad per sample
     phasors = np.full((stretches, offsets.size), np.nan + 0j)
     gains = np.full(stretches, np.nan)
+    hann = np.hanning(length)
     for j in range(stretches):
         start, stop = j * length, (j + 1) * length
-        taper = np.hanning(length)
-        if keep is not None:
-            taper = np.where(keep[start:stop], taper, 0.0)
+        taper = hann if keep is None else np.where(keep[start:stop], hann, 0.0)
         total = float(np.sum(taper))
         if np.count_nonzero(taper) < 4 * fs / frequency or total <= 0:
             continue
@@ -112,6 +111,14 @@ def segment_phasors(x: np.ndarray, frequency: float, fs: float, keep: np.ndarray
         phasors[j] = 2.0 * spectrum[offsets] / total
         gains[j] = float(np.sum(taper**2)) / total**2
     return phasors, gains
+
+
+def _beside(frequency: float, fs: float) -> list[int]:
+    """The stretch bins (signed offsets, ``BACKGROUND_OFFSETS`` either side) the background beside a line at
+    ``frequency`` (Hz) is measured at: those at least four bins inside 0 and fs / 2."""
+    resolution = 1.0 / LINE_STRETCH_S  # Hz: one stretch's bin
+    return [side * m for m in BACKGROUND_OFFSETS for side in (-1, 1)
+            if 4 * resolution < frequency + side * m * resolution < fs / 2 - 4 * resolution]
 
 
 def _block_departure(a: np.ndarray, gains: np.ndarray, around: np.ndarray) -> tuple[float, float, int]:
@@ -141,9 +148,7 @@ def line_departure(x: np.ndarray, frequency: float, fs: float, keep: np.ndarray 
     module docstring), the median over blocks of ``LINE_SEGMENTS`` stretches (one block of what there is
     on a recording shorter than that); ``keep`` (boolean, x's length): the samples it is measured on (all
     by default). No departure, and an infinite bound, when fewer than three stretches hold the line."""
-    resolution = 1.0 / LINE_STRETCH_S  # Hz: one stretch's bin
-    beside = [side * m for m in BACKGROUND_OFFSETS for side in (-1, 1)
-              if 4 * resolution < frequency + side * m * resolution < fs / 2 - 4 * resolution]
+    beside = _beside(frequency, fs)
     phasors, gains = segment_phasors(x, frequency, fs, keep, [0, *beside])
     blocks = [slice(b * LINE_SEGMENTS, (b + 1) * LINE_SEGMENTS) for b in range(max(phasors.shape[0] // LINE_SEGMENTS, 1))]
     found = [_block_departure(phasors[block, 0], gains[block], phasors[block, 1:]) for block in blocks]
@@ -161,9 +166,7 @@ def line_significance(x: np.ndarray, frequency: float, fs: float) -> float:
     ``BACKGROUND_OFFSETS`` beside the line in that stretch, over ln 2). Where the background changes
     along x (a sweep's residual: the model's misfit and the drive's harmonics pass each frequency in
     turn), the stretches the sweep's error crosses count for little; 0 when no stretch holds the line."""
-    resolution = 1.0 / LINE_STRETCH_S
-    beside = [side * m for m in BACKGROUND_OFFSETS for side in (-1, 1)
-              if 4 * resolution < frequency + side * m * resolution < fs / 2 - 4 * resolution]
+    beside = _beside(frequency, fs)
     phasors, _ = segment_phasors(x, frequency, fs, None, [0, *beside])
     if not beside or phasors.shape[0] == 0:
         return 0.0
