@@ -60,6 +60,11 @@ def _levels(a2: float, a3: float, amplitude: float) -> tuple[float, float]:
     return abs(a2) * amplitude / 2, abs(a3) * amplitude**2 / 4
 
 
+def _plausible(a2: float, a3: float, amplitude: float) -> bool:
+    """Whether both harmonics of u + a2 u^2 + a3 u^3 at a sine of ``amplitude`` lie below ``PLAUSIBLE_DB``."""
+    return max(_levels(a2, a3, amplitude)) < 10 ** (PLAUSIBLE_DB / 20)
+
+
 def refuted_by_sweeps(a2: float, a3: float, measured) -> bool:
     """Whether Farina's separation on the sweeps refutes the regression's polynomial a2 u^2 + a3 u^3: every
     harmonic it claims at the sweeps' amplitude A (H2 = |a2| A / 2, H3 = |a3| A^2 / 4, dB re the fundamental) that
@@ -97,7 +102,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     # peaks says nothing of a saturation (the seed's FB path, tanh H3 -20 dB at its sweeps' 0.008 FS,
     # noise peaks at 0.066 FS: +5.8 dB, and a clear nonlinearity went unnamed).
     swept = float(max(np.max(np.abs(r.u)) for r in ctx.sweeps))
-    plausible = max(_levels(a2, a3, swept)) < 10 ** (PLAUSIBLE_DB / 20)
+    plausible = _plausible(a2, a3, swept)
     significant = explained >= EXPLAINED and chi2 >= CHI2 and plausible
     score = min(explained / EXPLAINED, chi2 / CHI2)
     # The noise recording's regression, its levels judged at that recording's peak, where it was fitted.
@@ -106,8 +111,7 @@ def nonlinearity_finding(ctx: DiagnosisContext) -> dict:
     prediction = noise_prediction(ctx)
     noise_fit = input_polynomial(ctx.model, [ctx.noise], [{"linear": prediction, "residual": ctx.noise.y - prediction}],
                                  factor)
-    noise_plausible = max(_levels(noise_fit.a2, noise_fit.a3, float(np.max(np.abs(ctx.noise.u))))) < \
-        10 ** (PLAUSIBLE_DB / 20)
+    noise_plausible = _plausible(noise_fit.a2, noise_fit.a3, float(np.max(np.abs(ctx.noise.u))))
     noise_score = min(noise_fit.explained / EXPLAINED, noise_fit.chi2 / CHI2)
     # A clipped ear channel is a nonlinearity after the path, which the columns would take for one before it.
     noise_significant = not clipped and noise_plausible and noise_score >= 1.0
