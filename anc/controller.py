@@ -6,7 +6,8 @@
 crosses 1, ``crossovers`` their count), ``coherence_bound_db``, ``predicted_overall_dba``, ``notes``,
 ``provenance`` (which models, which spectrum, which options, the orders, the design's CPU time),
 ``limits`` (per band of ``bands_hz``, dB, positive = quieter at the ear, null where not computed:
-``causal_ff_db`` the causal Wiener feed-forward bound, ``coherence_db`` the coherence bound,
+``causal_ff_db`` the causal Wiener feed-forward bound, ``causal_ff_ruled_db`` the same within the
+design's rules (``anc.ruled_bound``), ``coherence_db`` the coherence bound,
 ``feedback_db`` the robust feedback bound, and ``reasons`` {"ff": [...], "fb": [...]}: what limits
 each band in words, "" where no single cause is named) and ``feedback_bound`` (the feedback bound's
 own record, ``anc.feedback_bound.FeedbackBound.to_dict``). Drive:
@@ -107,7 +108,7 @@ def _limits(data) -> dict | None:
     if not isinstance(data, dict) or not isinstance(data.get("bands_hz"), list):
         raise HelmetAncError("controller field 'limits' must be null or an object with bands_hz")
     n = len(data["bands_hz"])
-    for key in ("causal_ff_db", "coherence_db", "feedback_db"):
+    for key in ("causal_ff_db", "causal_ff_ruled_db", "coherence_db", "feedback_db"):
         values = data.get(key, [None] * n)
         if not isinstance(values, list) or len(values) != n:
             raise HelmetAncError(f"controller field 'limits': {key} must hold one value per band ({n})")

@@ -40,7 +40,7 @@ from .controller import BOARD_LATENCY_SAMPLES, Controller, StateSpaceFilter
 from .disturbance import Disturbance, default_disturbance
 from .feedback import ROBUSTNESS_BOUND, design_feedback, loop_margins
 from .feedforward import BAND_TOLERANCE_DB, design_feedforward
-from .limits import feedforward_limits
+from .limits import AMPLIFICATION_RANGE_DB, MAX_AMPLIFICATION_DB, MAX_GAIN_DB, RULES_PREFIX, feedforward_limits
 from .prediction import (band_attenuation, band_centres, band_grid, coherence_bound, drive_psd, ear_psd,
                          overall_dba)
 from .uncertainty import Uncertainty, model_uncertainty
@@ -74,15 +74,16 @@ PATH_INSTRUCTIONS = 60
 @dataclass(frozen=True)
 class DesignOptions:
     """Design choices. ``latency`` in samples from measurement to drive (>= 1; default the board's control
-    path, ``BOARD_LATENCY_SAMPLES``); ``max_amplification_db``: Q's amplification limit per band (dB);
+    path, ``BOARD_LATENCY_SAMPLES``); ``max_amplification_db``: the amplification limit per band (dB) of Q, of W
+    and of both (``anc.feedforward.allowed_ratio``);
     ``max_ff_gain_db``: W's gain bound outside the bands (dB); ``max_order``: the largest order of each
     filter (None: the order the design needs, cut to what the board affords when ``fit_board``: see
     ``board_orders``); ``drive_limit``: Q and W scaled so the drive's peaks stay within the FB model's
     drive limit (``drive_level``; a linear model has none)."""
 
     latency: int = BOARD_LATENCY_SAMPLES
-    max_amplification_db: float = 6.0
-    max_ff_gain_db: float = 30.0
+    max_amplification_db: float = MAX_AMPLIFICATION_DB
+    max_ff_gain_db: float = MAX_GAIN_DB
     feedback: bool = True
     feedforward: bool = True
     max_order: int | None = None
@@ -132,23 +133,29 @@ def predict(s_model: Model, disturbance: Disturbance, latency: int, fb: StateSpa
 def _ff_reason(text: str) -> str:
     """The feed-forward limit's reason as stored: a named cause as it is; the unexplained remainder
     ("regularisation: the drive path N dB below its peak, ...") only where the drive path is weak
-    (``WEAK_DRIVE_DB``), else nothing (the bound there is not explained by any one cause)."""
-    if not text.startswith("regularisation"):
+    (``WEAK_DRIVE_DB``), else nothing (the bound there is not explained by any one cause); the bound within
+    the design's rules (``anc.limits.RULES_CLAUSE``) kept wherever it is stated."""
+    text, prefix, rules = text.partition(RULES_PREFIX)
+    if text.startswith("regularisation"):
+        found = re.search(r"drive path (-?[0-9.]+) dB below", text)
+        below = float(found.group(1)) if found else 0.0
+        text = f"the drive path {below:.0f} dB below its loudest band" if below >= WEAK_DRIVE_DB else ""
+    if not rules:
         return text
-    found = re.search(r"drive path (-?[0-9.]+) dB below", text)
-    below = float(found.group(1)) if found else 0.0
-    return f"the drive path {below:.0f} dB below its loudest band" if below >= WEAK_DRIVE_DB else ""
+    return text + prefix + rules if text else (prefix + rules).lstrip("; ")
 
 
 def band_limits(bands_hz, ff_limits, fb_bound) -> dict:
-    """Per band of ``bands_hz``: the causal feed-forward bound, the coherence bound (None where silent or
-    without a reference), the robust feedback bound (None outside its judged bands) and what limits each
+    """Per band of ``bands_hz``: the causal feed-forward bound and the same within the design's rules, the
+    coherence bound (None where silent or without a reference), the robust feedback bound (None outside its
+    judged bands) and what limits each
     (``{"ff": [...], "fb": [...]}``, "" where nothing is named), all in dB, positive = quieter at the ear."""
     n = len(bands_hz)
-    limits = {"bands_hz": [float(b) for b in bands_hz], "causal_ff_db": [None] * n, "coherence_db": [None] * n,
-              "feedback_db": [None] * n, "reasons": {"ff": [""] * n, "fb": [""] * n}}
+    limits = {"bands_hz": [float(b) for b in bands_hz], "causal_ff_db": [None] * n, "causal_ff_ruled_db": [None] * n,
+              "coherence_db": [None] * n, "feedback_db": [None] * n, "reasons": {"ff": [""] * n, "fb": [""] * n}}
     if ff_limits is not None:
         limits["causal_ff_db"] = list(ff_limits.causal_ff_db)
+        limits["causal_ff_ruled_db"] = list(ff_limits.causal_ff_ruled_db or [None] * n)
         limits["coherence_db"] = list(ff_limits.coherence_db)
         limits["reasons"]["ff"] = [_ff_reason(r) for r in ff_limits.reasons]
         limits["latency_samples"] = int(ff_limits.latency_samples)
@@ -300,6 +307,11 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     if not (isinstance(options.latency, (int, np.integer)) and not isinstance(options.latency, bool)
             and options.latency >= 1):
         raise HelmetAncError(f"latency must be a whole number of samples >= 1; found {options.latency!r}")
+    low, high = AMPLIFICATION_RANGE_DB
+    if isinstance(options.max_amplification_db, bool) or not (isinstance(options.max_amplification_db, (int, float))
+                                                              and low < options.max_amplification_db <= high):
+        raise HelmetAncError(f"max_amplification_db must be a number of dB above {low:g} and at most {high:g}; "
+                             f"found {options.max_amplification_db!r}")
     if options.max_order is not None and not (isinstance(options.max_order, int) and options.max_order >= 3):
         raise HelmetAncError(f"max_order must be a whole number of states >= 3 (Q holds a double zero at DC and "
                              f"a mode) or None; found {options.max_order!r}")
@@ -339,12 +351,15 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     ff_limits = None
     if disturbance.has_reference or ff_model is not None:
         t0 = time.process_time()
-        ff_limits = feedforward_limits(fb_model, disturbance, options.latency, ff_model=ff_model)
+        ff_limits = feedforward_limits(fb_model, disturbance, options.latency, ff_model=ff_model,
+                                       max_amplification_db=options.max_amplification_db,
+                                       max_gain_db=options.max_ff_gain_db)
         timing["limits"] = time.process_time() - t0
     if options.feedforward and disturbance.has_reference:
         t0 = time.process_time()
         ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty, feedback_loop=loop_fn,
                                        ff_model=ff_model, max_gain_db=options.max_ff_gain_db,
+                                       max_amplification_db=options.max_amplification_db,
                                        loop_poles=_loop_poles(fb_model, fb, options.latency), **order_budget)
         if options.max_order is None and options.fit_board:
             q_order = 0 if fb is None else fb.order
@@ -360,7 +375,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             if w_fits < ff_design.filter.order or q_fits < q_order:
                 ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty,
                                                feedback_loop=loop_fn, ff_model=ff_model,
-                                               max_gain_db=options.max_ff_gain_db, max_order=w_fits,
+                                               max_gain_db=options.max_ff_gain_db,
+                                               max_amplification_db=options.max_amplification_db, max_order=w_fits,
                                                loop_poles=_loop_poles(fb_model, fb, options.latency))
         timing["feedforward"] = time.process_time() - t0
         ff = ff_design.filter
@@ -396,10 +412,11 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
         "uncertainty": uncertainty.to_dict(),
         "options": asdict(options),
         "truncation": truncation,
-        "feedforward_band_rule": {"tolerance_db": BAND_TOLERANCE_DB, "bands": "third-octave 20 Hz-2 kHz",
-                                  "rule": "W makes no band with noise louder than without it by more than the "
-                                          "tolerance: W alone against no control, W with Q against Q alone "
-                                          "(predicted on the models)"},
+        "feedforward_band_rule": {"limit_db": options.max_amplification_db, "tolerance_db": BAND_TOLERANCE_DB,
+                                  "bands": "third-octave 20 Hz-2 kHz",
+                                  "rule": "W makes no band with noise more than the limit louder than with ANC off, "
+                                          "alone and with Q; where Q alone is already that loud, W adds at most the "
+                                          "tolerance (predicted on the models)"},
         "robustness_bound": ROBUSTNESS_BOUND,
         "board": {"instructions_per_sample": cost, "budget_cycles_per_sample": BOARD_CYCLES_PER_SAMPLE,
                   "fits": fits},

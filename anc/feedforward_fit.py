@@ -189,9 +189,9 @@ class BandLevelFit:
         K = K + self.ridge
         return np.linalg.solve(K, -(region_weight @ self.q[self.objective] + w @ self.constraint_q))
 
-    def _constrained(self, region_weight: np.ndarray, band_limit: float, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _constrained(self, region_weight: np.ndarray, limit: np.ndarray,
+                     mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(y, mu): the minimiser of sum w_r P_r under the constraints, by the dual (class docstring), from mu."""
-        limit = np.where(self.is_band, band_limit, 1.0)
 
         def dual(mu):
             y = self._minimiser(region_weight, mu)
@@ -205,12 +205,24 @@ class BandLevelFit:
                                                     options={"maxiter": _DUAL_ITERATIONS}).x, 0.0)
         return self._minimiser(region_weight, mu), mu
 
+    def band_limits(self, limit_db: float, tolerance_db: float) -> np.ndarray:
+        """Per constraint, the largest ratio of its power to its power without W (``anc.feedforward.allowed_ratio``
+        on this grid): W alone ``limit_db`` above no control; W with Q ``limit_db`` above no control, or
+        ``tolerance_db`` above Q alone where Q alone is already that loud; 1 for the gain bound (its own scale)."""
+        limit = 10.0 ** (limit_db / 10.0)
+        bands = self.constraint_where[self.is_band]
+        case = np.repeat(np.arange(self.k.shape[0]), bands.size // self.k.shape[0])
+        beside_q = limit * self.k[0, bands] / np.maximum(self.k[-1, bands], 1e-300)
+        band = np.where(case == 0, limit, np.maximum(beside_q, 10.0 ** (tolerance_db / 10.0)))
+        return np.concatenate([band, np.ones(int(np.sum(~self.is_band)))])
+
     def gain_squared(self, y: np.ndarray) -> np.ndarray:
         """W's mean-square gain in each region outside the bands (``outside``), for W = y (whitened)."""
         return _quadratic_forms(self.gain, y) / self.width
 
-    def design(self, limit: float) -> tuple[np.ndarray, np.ndarray]:
-        """(c, mu): the coefficients of least mean log band power under the constraints, and the multipliers."""
+    def design(self, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(c, mu): the coefficients of least mean log band power under the constraints (``limit``: per constraint,
+        ``band_limits``), and the multipliers."""
         # Start from the ear power itself (every region, weight 1 / total): the filter of least ear power under the
         # rule; the rounds then only lower the criterion from there. Outside the bands the ear power keeps that
         # weight in every round (W is held there by it and by its gain bound, not by the bands' criterion).

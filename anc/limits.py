@@ -23,6 +23,10 @@ gives per band of ``anc.prediction``:
   output is penalised by ``EFFORT_FLOOR`` (-100 dB) of the peak |G|^2 over the bands, so
   1 / G_mp stays bounded where S is tiny or has a zero on the unit circle (a coupling
   high-pass's zero at DC);
+* the same bound under the design's rules (``anc.ruled_bound``): no band with noise more than the stated
+  amplification limit louder, W's mean-square gain per region outside the bands at most ``MAX_GAIN_DB``; the
+  Wiener bound buys attenuation with gain outside the bands wherever S or the chin path's lead keeps W from
+  cancelling (random pair 1/1001: 29.2 dB mean 50 Hz-1 kHz with 103 dB of gain outside; 17.9 dB within the rules);
 * the coherence bound -10 log10(1 - coh^2) (``anc.prediction.coherence_bound``);
 * in words, what limits the band (``reasons``): the coherence (within ``COHERENCE_REACHED_DB``
   of it), else the larger of two counterfactual gains, each one the bound again with one cause
@@ -30,7 +34,8 @@ gives per band of ``anc.prediction``:
   path advanced by the k samples its excess phase lags the chin path's (k from the group delay
   of the all-pass parts, averaged over the band); a gain of ``CAUSE_DB`` or more names the cause.
   Else the band is limited by the regularisation (the drive path weak there, or the chin noise
-  at its floor).
+  at its floor). Where the bound within the rules is ``CAUSE_DB`` or more below it, the reason says so and
+  names the gain the bound's filter needs outside the bands.
 
 The feedback bound is ``anc.feedback``'s; ``Limits`` has room for it (``feedback_db``).
 """
@@ -46,10 +51,12 @@ from sysid.core.model import Model
 
 from .disturbance import Disturbance, vouched_response
 from .prediction import BANDS, band_centres, band_grid, coherence_bound
+from .ruled_bound import outside_gain_db, ruled_wiener
 from .wiener import FFTGrid, allpass_split, causal_wiener, relative_floor
 
 __all__ = ["Limits", "FeedforwardProblem", "feedforward_limits", "chin_to_ear", "regions", "region_index", "CHIN_FLOOR",
-           "EFFORT_FLOOR", "OUTSIDE_WEIGHT", "COHERENCE_REACHED_DB", "CAUSE_DB", "SILENT_BAND"]
+           "EFFORT_FLOOR", "OUTSIDE_WEIGHT", "COHERENCE_REACHED_DB", "CAUSE_DB", "SILENT_BAND", "MAX_AMPLIFICATION_DB",
+           "MAX_GAIN_DB", "AMPLIFICATION_RANGE_DB", "RULES_CLAUSE", "RULES_PREFIX"]
 
 CHIN_FLOOR = 1e-6
 EFFORT_FLOOR = 1e-10
@@ -59,6 +66,17 @@ OUTSIDE_WEIGHT = 1e-6
 COHERENCE_REACHED_DB = 1.0
 # A counterfactual that raises the bound by this much names its cause.
 CAUSE_DB = 1.0
+# The design's rules (``anc.design.DesignOptions``' defaults): a band may be this much louder with control (dB),
+# and W's mean-square gain per region outside 20 Hz-2 kHz at most this (dB; ``anc.feedforward``).
+MAX_AMPLIFICATION_DB = 6.0
+MAX_GAIN_DB = 30.0
+# The amplification limits a design takes (dB, open below): none, and a loop that may make a band ten times louder.
+AMPLIFICATION_RANGE_DB = (0.0, 20.0)
+# Appended to a band's reason where the bound within the rules is CAUSE_DB or more below the bound.
+RULES_PREFIX = "; within the design's rules"
+RULES_CLAUSE = (RULES_PREFIX + " {0:.1f} dB (no band more than {1:g} dB louder, W's gain outside "
+                "20 Hz-2 kHz at most {2:g} dB: the bound's filter has {3:.0f} dB there, where the chin noise is at "
+                "its floor)")
 # A band whose ear power is below this fraction of the loudest band's has no bound worth stating.
 SILENT_BAND = 1e-6
 # Zeros this close to the unit circle (relative) are on it: a high-pass's zero at DC, not a non-minimum-phase zero.
@@ -185,7 +203,8 @@ class FeedforwardProblem:
 @dataclass(frozen=True)
 class Limits:
     """Per band of ``bands_hz`` (dB; None where the band is silent): the causal feed-forward bound, the
-    coherence bound and in words what limits it; the feedback bound when computed (``anc.feedback``)."""
+    coherence bound and in words what limits it; the causal bound within the design's rules
+    (``causal_ff_ruled_db``); the feedback bound when computed (``anc.feedback``)."""
 
     bands_hz: list[float]
     causal_ff_db: list[float | None]
@@ -194,9 +213,11 @@ class Limits:
     latency_samples: int
     details: dict = field(default_factory=dict)
     feedback_db: list[float | None] | None = None
+    causal_ff_ruled_db: list[float | None] | None = None
 
     def mean(self, part: str = "causal_ff", lo_hz: float = 50.0, hi_hz: float = 1000.0) -> float:
-        """Mean over the bands with centres in [lo_hz, hi_hz] of ``part`` ("causal_ff", "coherence", "feedback")."""
+        """Mean over the bands with centres in [lo_hz, hi_hz] of ``part`` ("causal_ff", "causal_ff_ruled",
+        "coherence", "feedback")."""
         values = getattr(self, f"{part}_db")
         chosen = [v for c, v in zip(self.bands_hz, values) if lo_hz <= c <= hi_hz and v is not None]
         return float(np.mean(chosen)) if chosen else float("nan")
@@ -218,11 +239,13 @@ class Limits:
                          reasons=[str(v) for v in data["reasons"]], latency_samples=int(data["latency_samples"]),
                          details=dict(data.get("details", {})),
                          feedback_db=None if data.get("feedback_db") is None else
-                         [None if v is None else float(v) for v in data["feedback_db"]])
+                         [None if v is None else float(v) for v in data["feedback_db"]],
+                         causal_ff_ruled_db=None if data.get("causal_ff_ruled_db") is None else
+                         [None if v is None else float(v) for v in data["causal_ff_ruled_db"]])
         except (KeyError, TypeError, ValueError) as exc:
             raise HelmetAncError(f"limits record: missing or malformed field ({exc})") from None
-        for name in ("causal_ff_db", "coherence_db", "reasons"):
-            if len(getattr(limits, name)) != len(limits.bands_hz):
+        for name in ("causal_ff_db", "coherence_db", "reasons", "causal_ff_ruled_db"):
+            if getattr(limits, name) is not None and len(getattr(limits, name)) != len(limits.bands_hz):
                 raise HelmetAncError(f"limits record: {name} has {len(getattr(limits, name))} values for "
                                      f"{len(limits.bands_hz)} bands")
         return limits
@@ -272,17 +295,22 @@ def _band_mean(problem: FeedforwardProblem, values: np.ndarray) -> np.ndarray:
 
 
 def feedforward_limits(s_model: Model, disturbance: Disturbance, latency: int, ff_model: Model | None = None,
-                       problem: FeedforwardProblem | None = None) -> Limits:
+                       problem: FeedforwardProblem | None = None, max_amplification_db: float = MAX_AMPLIFICATION_DB,
+                       max_gain_db: float = MAX_GAIN_DB) -> Limits:
     """The limits of ``s_model`` (S), the chin-to-ear response and the noise at ``latency`` samples (module docstring).
 
     ``ff_model``: P, when the disturbance does not carry its own (``from_recording(..., ff_model=P)``);
-    without either, H is the disturbance's coherent response.
+    without either, H is the disturbance's coherent response. ``max_amplification_db``, ``max_gain_db``: the
+    design's rules the bound within the rules keeps (dB).
     """
     if not (isinstance(latency, (int, np.integer)) and latency >= 0):
         raise HelmetAncError(f"latency must be a whole number of samples >= 0; found {latency!r}")
     problem = problem or FeedforwardProblem(s_model, disturbance, latency, ff_model)
     nb = problem.bands
-    bound = problem.attenuation(problem.wiener())[:nb]
+    wiener = problem.wiener()
+    bound = problem.attenuation(wiener)[:nb]
+    ruled = ruled_wiener(problem, max_amplification_db, max_gain_db)
+    within_rules = problem.attenuation(ruled.W)[:nb]
     coherence = np.array(coherence_bound(disturbance.at(band_grid().reshape(-1))))
     zeros = _nonminimum_phase_zeros(s_model)
     G_reflected = _reflected(problem, zeros) if zeros.size else problem.G
@@ -296,6 +324,7 @@ def feedforward_limits(s_model: Model, disturbance: Disturbance, latency: int, f
         advanced = problem.attenuation(problem.wiener(G_reflected * z ** lead), G=G_reflected * z ** lead)[:nb]
     s_db = 20.0 * np.log10(np.maximum(np.sqrt(_band_mean(problem, np.abs(problem.G) ** 2)), 1e-300))
     s_db = s_db - float(np.max(s_db[problem.audible])) if np.any(problem.audible) else s_db
+    outside_gain = outside_gain_db(problem, wiener)
     reasons = []
     for b in range(len(BANDS)):
         if not problem.audible[b]:
@@ -312,9 +341,17 @@ def feedforward_limits(s_model: Model, disturbance: Disturbance, latency: int, f
         else:
             reasons.append(f"regularisation: the drive path {-s_db[b]:.0f} dB below its peak, the chin noise "
                            f"floor {10 * np.log10(CHIN_FLOOR):.0f} dB")
+        if bound[b] - within_rules[b] >= CAUSE_DB:
+            reasons[-1] += RULES_CLAUSE.format(within_rules[b], max_amplification_db, max_gain_db, outside_gain)
     details = {"grid_points": problem.grid.points, "chin_floor": CHIN_FLOOR, "effort_floor": EFFORT_FLOOR,
                "s_zeros_outside": [[float(z0.real), float(z0.imag)] for z0 in zeros],
-               "chin_path_lead_samples": lead, "disturbance": dict(disturbance.source)}
+               "chin_path_lead_samples": lead, "disturbance": dict(disturbance.source),
+               "bound_outside_gain_db": outside_gain,
+               "within_rules": {"max_amplification_db": float(max_amplification_db), "max_gain_db": float(max_gain_db),
+                                "outside_gain_db": ruled.outside_gain_db, "feasible": ruled.feasible,
+                                "binding": list(ruled.binding), "iterations": ruled.iterations,
+                                "duality_gap_db": ruled.gap_db}}
     audible = problem.audible
     return Limits(band_centres(), [float(v) if a else None for v, a in zip(bound, audible)],
-                  [float(v) if a else None for v, a in zip(coherence, audible)], reasons, int(latency), details)
+                  [float(v) if a else None for v, a in zip(coherence, audible)], reasons, int(latency), details,
+                  causal_ff_ruled_db=[float(v) if a else None for v, a in zip(within_rules, audible)])

@@ -87,6 +87,7 @@ def attenuation_figure(controller: Controller, achieved: dict[str, list[float]] 
     limits = controller.limits or {}
     drawn = False
     for key, label, style, colour in (("causal_ff_db", "causal feed-forward bound", "--", "tab:blue"),
+                                      ("causal_ff_ruled_db", "the same within the design's rules", "-.", "tab:cyan"),
                                       ("coherence_db", "coherence bound", "--", "0.6"),
                                       ("feedback_db", "robust feedback bound", ":", "tab:red")):
         values = _values(limits.get(key))
@@ -173,8 +174,10 @@ def control_section(controller: Controller, achieved: dict[str, list[float]] | N
     (``anc.refinement.attenuation_along``), the refinement table and figure."""
     parts = ("ff", "fb", "both")
     limits = controller.limits or {}
-    bounds = [(key, label) for key, label in (("causal_ff_db", "causal ff bound"), ("coherence_db", "coherence bound"),
-                                              ("feedback_db", "feedback bound")) if limits.get(key) is not None]
+    bounds = [(key, label) for key, label in (("causal_ff_db", "causal ff bound"),
+                                              ("causal_ff_ruled_db", "causal ff bound within the rules"),
+                                              ("coherence_db", "coherence bound"), ("feedback_db", "feedback bound"))
+              if limits.get(key) is not None]
     head = "<tr><th>band (Hz)</th>" + "".join(f"<th>{p} predicted (dB)</th>" for p in parts)
     head += "".join(f"<th>{p} achieved (dB)</th>" for p in parts if achieved and p in achieved)
     head += "".join(f"<th>{label} (dB)</th>" for _, label in bounds) + ("<th>what limits it</th>" if limits else "")

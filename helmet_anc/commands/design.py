@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from anc.controller import BOARD_LATENCY_SAMPLES
+from anc.limits import AMPLIFICATION_RANGE_DB, MAX_AMPLIFICATION_DB
 from sysid.core.errors import HelmetAncError
 from sysid.core.files import atomic_write_text, check_output_file
 from sysid.core.model import Model
@@ -34,6 +35,17 @@ def _latency(text: str) -> int:
     return value
 
 
+def _amplification(text: str) -> float:
+    low, high = AMPLIFICATION_RANGE_DB
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not low < value <= high:
+        raise argparse.ArgumentTypeError(f"must be a number of dB above {low:g} and at most {high:g}; found {text!r}")
+    return value
+
+
 def register(commands) -> None:
     parser = commands.add_parser("design", help="design the ANC controller (feed-forward W, feedback Q) from the models")
     parser.add_argument("--fb", required=True, metavar="FB.json", help="feedback-path model (drive -> ear)")
@@ -47,6 +59,9 @@ def register(commands) -> None:
     parser.add_argument("--max-order", metavar="N",
                         help="largest order (states) of Q and of W; default: the orders the design needs, cut to "
                              "what the board's 1750 cycles per sample afford")
+    parser.add_argument("--max-amplification", type=_amplification, default=MAX_AMPLIFICATION_DB, metavar="DB",
+                        help=f"no band louder than with ANC off by more than this, with Q, W or both (default "
+                             f"{MAX_AMPLIFICATION_DB:g} dB; the feedback's waterbed and W's trades are held to it)")
     parser.add_argument("--ignore-drive-limit", action="store_true",
                         help="keep Q and W at full scale even where the drive's peaks exceed the FB model's drive "
                              "limit (its input nonlinearity's harmonics at -20 dB); by default they are scaled to it")
@@ -67,7 +82,10 @@ _COMPACT = ((re.compile(r"^coherence"), lambda m: "coherence"),
             (re.compile(r"zero of S outside the unit circle at z = ([0-9.]+)"), lambda m: f"zero of S at z = {m.group(1)}"),
             (re.compile(r"zero of S outside the unit circle at ([0-9.]+) Hz"), lambda m: f"zero of S at {m.group(1)} Hz"),
             (re.compile(r"drive path (\d+) dB below"), lambda m: f"drive path -{m.group(1)} dB"),
-            (re.compile(r"^the model's uncertainty"), lambda m: "the model's uncertainty"))
+            (re.compile(r"^the model's uncertainty"), lambda m: "the model's uncertainty"),
+            (re.compile(r"^within the design's rules"), lambda m: "the design's rules"))
+# A reason's bound within the design's rules (``anc.limits.RULES_CLAUSE``), whose per-band figure is in the table.
+_RULES = "within the design's rules"
 # The feedback bound's reasons start with the band and its bound ("501.187 Hz: 5.8 dB, limited by ..."), which the
 # table's row already shows.
 _PREFIX = re.compile(r"^[0-9.]+ Hz: -?[0-9.]+ dB, limited by ")
@@ -100,7 +118,9 @@ def reason_lines(controller) -> list[str]:
         runs: list[list] = []
         for centre, text in zip(controller.bands_hz, reasons.get(name) or []):
             # One line per cause: the band's own figures (its bound, the gain without the cause) are in the table.
-            text = _PREFIX.sub("", text).split(" (without")[0]
+            main, _, ruled = _PREFIX.sub("", text).partition(_RULES)
+            ruled = f"the bound is lower {_RULES} ({ruled.split(' (', 1)[1]}" if ruled else ""
+            text = "; ".join(part for part in (main.rstrip("; ").split(" (without")[0], ruled) if part)
             if runs and runs[-1][2] == text:
                 runs[-1][1] = centre
             else:
@@ -131,16 +151,18 @@ def table(controller) -> str:
     limits = controller.limits or {}
     n = len(controller.bands_hz)
     causal = limits.get("causal_ff_db", [None] * n)
+    ruled = limits.get("causal_ff_ruled_db") or [None] * n
     coherence = limits.get("coherence_db") or controller.coherence_bound_db or [None] * n
     feedback = limits.get("feedback_db", [None] * n)
     lines = [f"attenuation at the ear per third-octave band, dB (positive = quieter at the ear); latency "
              f"{controller.latency_samples} samples",
              "                predicted              limits",
-             "band (Hz)    ff     fb   both    causal ff  coherence  feedback   what limits it"]
+             "band (Hz)    ff     fb   both    causal ff  in rules  coherence  feedback   what limits it"]
     p = controller.predicted_attenuation_db
     for i, centre in enumerate(controller.bands_hz):
         lines.append(f"{centre:9.0f} {_db(p['ff'][i])} {_db(p['fb'][i])} {_db(p['both'][i])}    "
-                     f"{_db(causal[i]):>9} {_db(coherence[i]):>10} {_db(feedback[i]):>9}   {_reason(controller, i)}")
+                     f"{_db(causal[i]):>9} {_db(ruled[i]):>9} {_db(coherence[i]):>10} {_db(feedback[i]):>9}   "
+                     f"{_reason(controller, i)}")
     lines += reason_lines(controller)
     overall = controller.predicted_overall_dba
     if overall:
@@ -171,7 +193,7 @@ def run(args) -> int:
         disturbance = default_disturbance(fb.fs, ff)
     provenance = {"fb_model": str(args.fb), "ff_model": args.ff, "disturbance_file": args.disturbance}
     options = DesignOptions(latency=args.latency, max_order=parse_max_order(args.max_order),
-                            drive_limit=not args.ignore_drive_limit)
+                            drive_limit=not args.ignore_drive_limit, max_amplification_db=args.max_amplification)
     controller = design(fb, ff, disturbance, options, provenance=provenance)
     controller.save(output)
     if report is not None:

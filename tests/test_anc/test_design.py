@@ -263,3 +263,22 @@ def test_a_saturating_driver_gets_q_scaled_to_its_drive_limit():
     # The uncertainty disc r95 |G Q| <= 0.5 shrinks with the scale: the design's factor (at least about 1) over it.
     assert limited.margins["robustness_factor"] >= 0.95 / drive["applied_scale"]
     assert any(n.startswith("drive:") and "scaled by" in n and "--ignore-drive-limit" in n for n in limited.notes)
+
+
+@pytest.mark.parametrize("limit", [0.0, -3.0, 25.0, float("nan"), True])
+def test_a_bad_amplification_limit_is_refused(limit):
+    with pytest.raises(HelmetAncError, match="max_amplification_db"):
+        design(appendix_a_model("fb"), options=DesignOptions(max_amplification_db=limit))
+
+
+@pytest.mark.parametrize("limit", ["0", "-1", "21", "six"])
+def test_cli_design_bad_amplification_limit_is_one_line_and_writes_nothing(tmp_path, capsys, limit):
+    fb = tmp_path / "fb.json"
+    appendix_a_model("fb").save(fb)
+    out = tmp_path / "controller.json"
+    with pytest.raises(SystemExit) as exited:
+        main(["design", "--fb", str(fb), "--max-amplification", limit, "-o", str(out)])
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-amplification" in err and "at most 20" in err
+    assert not out.exists()

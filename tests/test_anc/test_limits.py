@@ -117,3 +117,26 @@ class TestSeedLimits:
         disturbance = from_recording(recording_with_anc_off(pair.p, seconds=1.0), ff_model=pair.p)
         with pytest.raises(HelmetAncError, match="latency"):
             feedforward_limits(pair.s, disturbance, -1)
+
+
+class TestWithinTheRules:
+    def test_the_bound_within_the_rules_is_recorded_and_lower(self, seed_limits):
+        ruled = seed_limits.causal_ff_ruled_db
+        assert ruled is not None and len(ruled) == len(seed_limits.bands_hz)
+        assert seed_limits.mean("causal_ff_ruled", *JUDGED_HZ) < seed_limits.mean("causal_ff", *JUDGED_HZ) - 0.5
+        within = seed_limits.details["within_rules"]
+        assert within["feasible"] and within["outside_gain_db"] <= within["max_gain_db"] + 0.1
+        assert seed_limits.details["bound_outside_gain_db"] > within["max_gain_db"] + 40.0
+
+    def test_the_reason_states_the_gain_the_bound_needs(self, seed_limits):
+        stated = [(ruled, reason) for bound, ruled, reason in zip(seed_limits.causal_ff_db,
+                                                                  seed_limits.causal_ff_ruled_db, seed_limits.reasons)
+                  if bound is not None and bound - ruled >= 1.0]
+        assert len(stated) >= 5
+        for ruled, reason in stated:
+            assert f"within the design's rules {ruled:.1f} dB" in reason and "outside 20 Hz-2 kHz" in reason
+
+    def test_a_record_without_it_still_loads(self, seed_limits):
+        data = seed_limits.to_dict()
+        del data["causal_ff_ruled_db"]
+        assert Limits.from_dict(data).causal_ff_ruled_db is None
