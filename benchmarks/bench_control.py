@@ -43,14 +43,13 @@ from control_cases import (JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pa
 
 from anc import design  # noqa: E402
 from anc.controller import BOARD_LATENCY_SAMPLES  # noqa: E402
-from anc.design import board_cost  # noqa: E402
+from anc.design import BOARD_CYCLES_PER_SAMPLE, board_cost  # noqa: E402
 from anc.disturbance import from_recording  # noqa: E402
 from anc.fxlms import run_until_converged  # noqa: E402
-from anc.design import BOARD_CYCLES_PER_SAMPLE  # noqa: E402
 from codegen.qemu_cost import have_m4_tools  # noqa: E402
 from sysid.core.errors import HelmetAncError  # noqa: E402
 
-EMULATED_COLUMNS = ("S order", "Q15 path emulated instr. / sample (% of budget)", "emulated S / Q / W step",
+EMULATED_COLUMNS = ("S order", "Q15 path emulated instr. / sample (% of budget)", "emulated S / Q / W step (sections)",
                     "float32 path emulated", "host = twin = QEMU (Q15, float32)")
 
 
@@ -83,7 +82,9 @@ def _emulated(controller, pair, loop_seconds: float) -> list[str]:
     q15 = costs.get("q15", {})
     path = (f"{q15['control path']:.0f} ({100 * q15['control path'] / BOARD_CYCLES_PER_SAMPLE:.1f} %)" if q15 else
             f"not generated: {plan.refused.get('q15', '?')}")
-    steps = " / ".join(f"{q15[name]:.0f}" for name in ("ctl_s", "ctl_q", "ctl_w")) if q15 else "-"
+    sections = {name: len(plan.plans[part].cascade.sections) if part in plan.plans else 0
+                for name, part in (("ctl_s", "model"), ("ctl_q", "fb"), ("ctl_w", "ff"))}
+    steps = " / ".join(f"{q15[name]:.0f} ({sections[name]})" for name in sections) if q15 else "-"
     floating = (f"{costs['float']['control path']:.0f}" if "float" in costs else
                 f"not generated: {plan.refused.get('float', '?')}")
     equal = ", ".join(("yes" if v["host_equals_twin"] and v["m4_equals_host"] else
