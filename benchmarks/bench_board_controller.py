@@ -97,9 +97,12 @@ def filter_rows(plan, seconds: float) -> list[dict]:
     return rows
 
 
-def closed_loop_equal(plan, fw: Path, root: Path, seconds: float) -> dict:
-    """Ear words of the Python twin, the host build and the Cortex-M4 ELF (QEMU) per variant: equal?"""
-    s_true, p_true = appendix_a_model("fb"), appendix_a_model("ff")
+def closed_loop_equal(plan, fw: Path, root: Path, seconds: float, s_true=None, p_true=None) -> dict:
+    """Ear words of the Python twin, the host build and the Cortex-M4 ELF (QEMU) per variant: equal? The loop
+    runs on the true FB plant ``s_true`` with the default wind/engine noise through ``p_true`` (the seed's
+    appendix-A pair when not given)."""
+    s_true = appendix_a_model("fb") if s_true is None else s_true
+    p_true = appendix_a_model("ff") if p_true is None else p_true
     fs = plan.controller.fs
     x, u = synthesize(default_disturbance(fs, p_true), int(seconds * fs), fs, 0)
     d = p_true.simulate(x) + u
