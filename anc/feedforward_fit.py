@@ -48,6 +48,10 @@ _DAMPINGS = (0.05, 0.15, 0.5)
 _FIR_TAPS = 16
 # The log-spaced grid of the fit and its blocks (``anc.basis.qr_blocks``).
 _FIT_POINTS = 8192
+# W's gain bound below the grid's start holds down to here (Hz), on this many points: the criterion does not
+# look there (no band), but a chin microphone's wind and handling noise does, and the board's fixed point would.
+_SUBSONIC_HZ = 0.5
+_SUBSONIC_POINTS = 64
 _BLOCK = 1024
 
 
@@ -160,6 +164,11 @@ class BandLevelFit:
                     t = np.sqrt(weight[k][rows]) * target[k][rows]
                     self.q[case, index] += np.real(np.conj(t) @ m[rows])
                     self.k[case, index] += float(np.sum(np.abs(t) ** 2) + np.sum(floor[k][rows]))
+        subsonic = np.geomspace(_SUBSONIC_HZ, f[1], _SUBSONIC_POINTS, endpoint=False)
+        plain = np.sqrt(np.gradient(subsonic))[:, None] * basis.responses(subsonic, fs) @ self.R_inv
+        below = region_index(subsonic[:1], fs)[0]
+        gain[below] += np.real(plain.conj().T @ plain)
+        width[below] += float(np.sum(np.gradient(subsonic)))
         self.ridge = np.eye(n) * 1e-12 * float(np.trace(np.sum(self.A, axis=0))) / n
         self.objective = len(targets) - 1
         self.noisy = np.append(problem.audible, np.zeros(self.regions - problem.bands, bool))

@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+# This checkout's packages, not an installed copy, and the tests' control cases.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from control_cases import (JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pair,  # noqa: E402
@@ -140,10 +142,11 @@ def main() -> None:
         print("| pair | FxLMS converged (time of record, step / bound) |\n|---|---|")
     else:
         extra = EMULATED_COLUMNS if args.emulate else ()
-        print("| pair | causal ff bound | coherence bound | robust fb bound | ours ff | ours fb | ours both | "
-              "FxLMS converged (time, step / bound) | W order (of) | Q order (of) | design CPU s | board instructions "
-              "per sample (estimate) |" + "".join(f" {c} |" for c in extra))
-        print("|---" * (12 + len(extra)) + "|")
+        print("| pair | causal ff bound | within the rules | coherence bound | robust fb bound | ours ff | ours fb | "
+              "ours both | worst band vs predicted | quietest band | FxLMS converged (time, step / bound) | "
+              "W order (of) | Q order (of) | design CPU s | board instructions per sample (estimate) |"
+              + "".join(f" {c} |" for c in extra))
+        print("|---" * (15 + len(extra)) + "|")
     for key in args.pairs.split(","):
         name = "seed" if key == "seed" else f"random {int(key)}"
         pair = seed_pair() if key == "seed" else random_pair(int(key))
@@ -172,10 +175,14 @@ def main() -> None:
         limits = controller.limits or {}
         t = controller.provenance.get("truncation", {})
         orders = [f"{t[k]['order']} ({t[k]['full_order']})" if k in t else "-" for k in ("ff", "fb")]
-        print(f"| {pair.name} | {_mean(limits.get('causal_ff_db')):.1f} | {_mean(limits.get('coherence_db')):.1f} | "
+        predicted = controller.predicted_attenuation_db
+        worst = max(float(np.max(np.abs(judged.per_band[p] - np.array(predicted[p]))[JUDGED])) for p in judged.per_band)
+        quietest = min(float(np.min(judged.per_band[p][JUDGED])) for p in judged.per_band)
+        print(f"| {pair.name} | {_mean(limits.get('causal_ff_db')):.1f} | "
+              f"{_mean(limits.get('causal_ff_ruled_db')):.1f} | {_mean(limits.get('coherence_db')):.1f} | "
               f"{_mean(limits.get('feedback_db')):.1f} | "
               + " | ".join(f"{judged.mean(p):.1f}" if p in judged.per_band else "-" for p in ("ff", "fb", "both"))
-              + f" | {fx_text} | {orders[0]} | {orders[1]} | {seconds:.0f} | "
+              + f" | {worst:.1f} | {quietest:.1f} | {fx_text} | {orders[0]} | {orders[1]} | {seconds:.0f} | "
               f"{board_cost(s_id.order, *(f.order for f in (controller.fb, controller.ff) if f is not None))} |"
               + "".join(f" {c} |" for c in emulated))
         sys.stdout.flush()

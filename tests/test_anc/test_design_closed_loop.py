@@ -11,7 +11,8 @@ A design takes about 40 CPU-s (seed pair and random pair 7: 9-10 s the feedback 
 feed-forward fits in both bases, at the board's orders), minutes of wall time on a shared 2-core machine,
 so every pair is marked slow; the seed pair and random pairs 3 and 11 are the representative handful that
 belong in the default run once a design takes seconds (``REPRESENTATIVE``). The pairs that miss a check today,
-and why in physical terms, are in BENCHMARKS.md "Every pair (issue 26)" (random 1, 4, 6, 9, 10, 13).
+and why in physical terms, are in BENCHMARKS.md "W's band rule at the stated limit, and the bound within the design's
+rules" (random 1, 4, 6, 8, 9, 10, 12).
 """
 
 from __future__ import annotations
@@ -25,11 +26,14 @@ from control_cases import JUDGED, RANDOM_FB_SEEDS, identified, judge, random_pai
 from anc import design
 from anc.closed_loop import closed_loop_poles
 from anc.disturbance import from_recording
+from anc.prediction import BANDS
 
 BOTH_SHORTFALL_DB = 3.0
 ENOUGH_DB = 25.0
 FEEDBACK_SHORTFALL_DB = 1.5
 PREDICTION_DB = 2.0
+# W's gain bound below the bands, as measured on a dense linear grid against the fit's own (dB).
+GRID_DB = 2.0
 REPRESENTATIVE = ["seed", "random 3", "random 11"]
 OTHERS = [f"random {seed}" for seed in RANDOM_FB_SEEDS if f"random {seed}" not in REPRESENTATIVE]
 NAMES = [pytest.param(name, marks=pytest.mark.slow) for name in REPRESENTATIVE + OTHERS]
@@ -92,3 +96,15 @@ def test_no_band_louder_than_the_stated_limit(name):
     limit = controller.provenance["options"]["max_amplification_db"]
     for part, achieved in judged.per_band.items():
         assert np.min(achieved[JUDGED]) >= -limit, f"{name} {part}: {np.round(achieved[JUDGED], 1)}"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_w_keeps_its_gain_bound_below_the_bands(name):
+    # Below 20 Hz no band asks for anything, but a chin microphone's wind and handling noise is there. The bound is
+    # held on the fit's log-spaced grid and the truncation may keep the fitted filter's gain on the dense grid:
+    # GRID_DB between the two (random 13: 31.3 dB here; 62 dB at 2 Hz before the bound reached below 7.5 Hz).
+    controller, _ = case(name)
+    f = np.linspace(0.5, BANDS[0][1], 400)
+    mean_square = float(np.mean(np.abs(controller.ff.frequency_response(f, controller.fs)) ** 2))
+    bound = controller.provenance["options"]["max_ff_gain_db"]
+    assert 10.0 * np.log10(mean_square) <= bound + GRID_DB, f"{name}: {10.0 * np.log10(mean_square):.1f} dB"
