@@ -66,7 +66,7 @@ from sysid.core.model import Model
 from .basis import KautzBasis, StateBasis, state_responses
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
-from .feedforward_fit import BandLevelFit, kautz_poles, path_poles, spread
+from .feedforward_fit import BandLevelFit, kautz_poles, path_poles, rule_ratios, spread
 from .limits import MAX_AMPLIFICATION_DB, MAX_GAIN_DB, FeedforwardProblem, regions
 from .prediction import band_centres, band_grid
 from .uncertainty import Uncertainty
@@ -124,15 +124,10 @@ def _onset(impulse: np.ndarray) -> int:
 
 
 def allowed_ratio(problem: FeedforwardProblem, limit_db: float) -> np.ndarray:
-    """(cases, regions): the band rule (module docstring) as the largest ratio of ear power with W to without it,
-    W alone (against no control) and, with a loop, W with Q (against Q alone): ``limit_db`` louder than with ANC
-    off, or ``BAND_TOLERANCE_DB`` beyond Q alone where Q alone is already that loud; no limit outside the rule."""
-    limit = 10.0 ** (limit_db / 10.0)
-    rows = [np.full(problem.off.size, limit)]
-    if problem.loop is not None:
-        rows.append(np.maximum(limit * problem.off / np.maximum(problem.off_with_loop, 1e-300),
-                               10.0 ** (BAND_TOLERANCE_DB / 10.0)))
-    return np.where(problem.ruled, np.array(rows), np.inf)
+    """(cases, regions): the band rule (module docstring; ``anc.feedforward_fit.rule_ratios``) on the problem's
+    regions, W alone and, with a loop, W with Q; no limit outside the rule."""
+    with_q = problem.off_with_loop if problem.loop is not None else None
+    return np.where(problem.ruled, rule_ratios(problem.off, with_q, limit_db, BAND_TOLERANCE_DB), np.inf)
 
 
 def _excess(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> np.ndarray:
@@ -142,11 +137,6 @@ def _excess(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> np.n
     if problem.loop is not None:
         excess = np.maximum(excess, -problem.attenuation(W, with_loop=True) - allowed[1])
     return np.where(problem.ruled, excess, -np.inf)
-
-
-def _outside_gain(problem: FeedforwardProblem, W: np.ndarray) -> np.ndarray:
-    """W's mean-square gain in each region outside the bands (W on ``problem.checked``)."""
-    return (problem.band_sum(np.abs(W) ** 2) / np.maximum(problem.band_sum(np.ones(W.size)), 1e-300))[problem.bands:]
 
 
 def _largest_scale(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> float:
@@ -245,10 +235,10 @@ def _designed_in(basis: KautzBasis, problem: FeedforwardProblem, full: np.ndarra
     reference = problem.attenuation(fitted)[:nb]
     reference_loop = problem.attenuation(fitted, with_loop=True)[:nb] if with_loop else None
 
-    gain_limit = np.maximum(max_gain ** 2, _outside_gain(problem, fitted)) * 10.0 ** (BAND_TOLERANCE_DB / 10.0)
+    gain_limit = np.maximum(max_gain ** 2, problem.outside_gain(fitted)) * 10.0 ** (BAND_TOLERANCE_DB / 10.0)
 
     def acceptable(W: np.ndarray) -> bool:
-        if np.any(_outside_gain(problem, W) > gain_limit):
+        if np.any(problem.outside_gain(W) > gain_limit):
             return False
         close = np.all((problem.attenuation(W)[:nb] >= reference - REALISATION_TOLERANCE_DB)[problem.audible])
         if with_loop:

@@ -29,7 +29,7 @@ from .feedback import RMS_PER_95
 from .limits import FeedforwardProblem, chin_to_ear, region_index, regions
 from .uncertainty import LINEARISATION_LIMIT, Uncertainty
 
-__all__ = ["BandLevelFit", "kautz_poles", "path_poles", "spread"]
+__all__ = ["BandLevelFit", "kautz_poles", "path_poles", "rule_ratios", "spread"]
 
 # Iterations of the dual problem (L-BFGS-B), rounds of the majorisation-minimisation and the change of
 # every band's power (dB) below which it has settled.
@@ -48,11 +48,11 @@ _DAMPINGS = (0.05, 0.15, 0.5)
 _FIR_TAPS = 16
 # The log-spaced grid of the fit and its blocks (``anc.basis.qr_blocks``).
 _FIT_POINTS = 8192
+_BLOCK = 1024
 # W's gain bound below the grid's start holds down to here (Hz), on this many points: the criterion does not
 # look there (no band), but a chin microphone's wind and handling noise does, and the board's fixed point would.
 _SUBSONIC_HZ = 0.5
 _SUBSONIC_POINTS = 64
-_BLOCK = 1024
 
 
 def kautz_poles(s_model: Model, ff_model: Model | None, delay: int) -> np.ndarray:
@@ -215,15 +215,12 @@ class BandLevelFit:
         return self._minimiser(region_weight, mu), mu
 
     def band_limits(self, limit_db: float, tolerance_db: float) -> np.ndarray:
-        """Per constraint, the largest ratio of its power to its power without W (``anc.feedforward.allowed_ratio``
-        on this grid): W alone ``limit_db`` above no control; W with Q ``limit_db`` above no control, or
-        ``tolerance_db`` above Q alone where Q alone is already that loud; 1 for the gain bound (its own scale)."""
-        limit = 10.0 ** (limit_db / 10.0)
-        bands = self.constraint_where[self.is_band]
-        case = np.repeat(np.arange(self.k.shape[0]), bands.size // self.k.shape[0])
-        beside_q = limit * self.k[0, bands] / np.maximum(self.k[-1, bands], 1e-300)
-        band = np.where(case == 0, limit, np.maximum(beside_q, 10.0 ** (tolerance_db / 10.0)))
-        return np.concatenate([band, np.ones(int(np.sum(~self.is_band)))])
+        """Per constraint, the largest ratio of its power to its power without W (``rule_ratios`` on this grid's
+        powers); 1 for the gain bound (its own scale)."""
+        cases = self.k.shape[0]
+        bands = self.constraint_where[self.is_band][:int(np.sum(self.is_band)) // cases]
+        ratios = rule_ratios(self.k[0, bands], self.k[-1, bands] if cases > 1 else None, limit_db, tolerance_db)
+        return np.concatenate([ratios.reshape(-1), np.ones(int(np.sum(~self.is_band)))])
 
     def gain_squared(self, y: np.ndarray) -> np.ndarray:
         """W's mean-square gain in each region outside the bands (``outside``), for W = y (whitened)."""
@@ -247,6 +244,18 @@ class BandLevelFit:
             previous = power
             region_weight = np.where(self.noisy, 1.0 / np.maximum(power, 1e-300), ear_power)
         return self.R_inv @ y, mu
+
+
+def rule_ratios(off: np.ndarray, with_q: np.ndarray | None, limit_db: float, tolerance_db: float) -> np.ndarray:
+    """(cases, bands): the band rule (``anc.feedforward``) as the largest ratio of ear power with W to without it,
+    from the power per band with no control (``off``) and with Q alone (``with_q``; None without a loop): W alone
+    ``limit_db`` above no control; W with Q ``limit_db`` above no control, or ``tolerance_db`` above Q alone where
+    Q alone is already that loud."""
+    limit = 10.0 ** (limit_db / 10.0)
+    rows = [np.full(np.shape(off), limit)]
+    if with_q is not None:
+        rows.append(np.maximum(limit * off / np.maximum(with_q, 1e-300), 10.0 ** (tolerance_db / 10.0)))
+    return np.array(rows)
 
 
 def spread(uncertainty: Uncertainty | None, frequencies_hz: np.ndarray) -> np.ndarray | float:

@@ -176,6 +176,10 @@ class FeedforwardProblem:
                                minlength=int(self.region.max()) + 1)
         return np.bincount(self.region, weights=values, minlength=int(self.region.max()) + 1)
 
+    def outside_gain(self, W: np.ndarray) -> np.ndarray:
+        """W's mean-square gain in each region outside the bands (W on every bin, or on ``checked``)."""
+        return (self.band_sum(np.abs(W) ** 2) / np.maximum(self.band_sum(np.ones(W.size)), 1e-300))[self.bands:]
+
     def attenuation(self, W: np.ndarray, with_loop: bool = False, G: np.ndarray | None = None) -> np.ndarray:
         """Per region 10 log10(ear power without W / with W) (dB): W alone, or W with the loop against the loop
         alone; through G, or another drive path (a counterfactual's). The bands are the first ``bands``."""

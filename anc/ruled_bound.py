@@ -59,11 +59,8 @@ class RuledBound:
 
 
 def outside_gain_db(problem, W: np.ndarray) -> float:
-    """W's largest mean-square gain (dB) in a region outside the bands (``anc.limits.regions``)."""
-    regions = int(problem.region.max()) + 1
-    counts = np.maximum(np.bincount(problem.region, minlength=regions), 1)
-    gain = problem.band_sum(np.abs(W) ** 2) / counts
-    return float(10.0 * np.log10(max(float(np.max(gain[problem.bands:], initial=0.0)), 1e-300)))
+    """W's largest mean-square gain (dB) in a region outside the bands (``FeedforwardProblem.outside_gain``)."""
+    return float(10.0 * np.log10(max(float(np.max(problem.outside_gain(W), initial=0.0)), 1e-300)))
 
 
 def ruled_wiener(problem, max_amplification_db: float, max_gain_db: float) -> RuledBound:
@@ -100,9 +97,9 @@ def ruled_wiener(problem, max_amplification_db: float, max_gain_db: float) -> Ru
         dual = cost + float(np.sum(np.where(ruled, multiplier * (used - limit), 0.0)))
         worst = float(np.max(ratio))
         if worst <= tolerance and (best is None or cost < best[0]):
-            best = (cost, W, iteration, dual)
+            best = (cost, W)
         if least_violating is None or worst < least_violating[0]:
-            least_violating = (worst, W, iteration, dual, cost)
+            least_violating = (worst, cost, W)
         active = multiplier > 0.0
         if worst <= tolerance and np.all(ratio[active] >= 1.0 / tolerance):
             break
@@ -111,12 +108,8 @@ def ruled_wiener(problem, max_amplification_db: float, max_gain_db: float) -> Ru
         multiplier[multiplier < _RELEASED * start] = 0.0
     binding = tuple(name for name, where in (("bands", in_band), ("gain outside", outside))
                     if np.any(multiplier[where] > 0.0))
-    if best is not None:
-        cost, W, _, _ = best
-        feasible = True
-    else:
-        _, W, _, _, cost = least_violating
-        feasible = False
+    feasible = best is not None
+    cost, W = best if feasible else least_violating[1:]
     # The dual function at the last multipliers bounds every feasible J from below (weak duality).
     gap = 10.0 * np.log10(max(cost, 1e-300) / max(dual, 1e-300)) if dual > 0.0 else float("inf")
     return RuledBound(W, feasible, iteration, float(gap), binding, outside_gain_db(problem, W))
