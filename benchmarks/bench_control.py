@@ -50,10 +50,10 @@ from anc.controller import BOARD_LATENCY_SAMPLES  # noqa: E402
 from anc.design import BOARD_CYCLES_PER_SAMPLE, board_cost  # noqa: E402
 from anc.disturbance import from_recording  # noqa: E402
 from anc.fxlms import run_until_converged  # noqa: E402
+from codegen.controller import CONTROLLER_MIN_SNR_DB as MIN_SNR  # noqa: E402
 from codegen.qemu_cost import have_m4_tools  # noqa: E402
 from sysid.core.errors import HelmetAncError  # noqa: E402
 
-MIN_SNR = 30.0  # dB, generate-firmware --controller's default floor
 EMULATED_COLUMNS = ("S order", "Q15 path emulated instr. / sample (% of budget)", "emulated S / Q / W step (sections)",
                     "float32 path emulated", "host = twin = QEMU (Q15, float32)")
 

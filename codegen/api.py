@@ -18,7 +18,7 @@ from sysid.core.model import Model
 from .build import host_filter
 from .c_syntax import validate_name
 from .context import build_context, controller_config_context
-from .controller import CONTROL_BLOCK_MAX, FILTER_NAMES, plan_controller
+from .controller import CONTROL_BLOCK_MAX, CONTROLLER_MIN_SNR_DB, FILTER_NAMES, plan_controller
 from .manifest import (MANIFEST_FORMAT, Manifest, check_output, json_ready, manifest_data, manifest_text,
                        write_directory)
 from .plan import plan_firmware
@@ -80,7 +80,8 @@ def generate_firmware(model, outdir, name: str | None = None, variant: str = "bo
     return Manifest(outdir=Path(outdir), data=data)
 
 
-def generate_controller_firmware(controller, outdir, *, variant: str = "both", min_snr: float = 30.0,
+def generate_controller_firmware(controller, outdir, *, variant: str = "both",
+                                 min_snr: float = CONTROLLER_MIN_SNR_DB,
                                  quantiser: str = "efb", force: bool = False, progress=None) -> Manifest:
     """Generate the control path's filters of ``controller`` (an :class:`anc.controller.Controller`
     or a path to its JSON) into ``outdir`` (:func:`codegen.controller.plan_controller`); returns the

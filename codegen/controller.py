@@ -39,13 +39,15 @@ from .errors import CodegenError, PrecisionError
 from .plan import Plan, plan_firmware
 from .targets import get_target, refusal_reason
 
-__all__ = ["CONTROL_BLOCK_MAX", "FILTER_NAMES", "ControllerPlan", "format_headroom_table", "headroom",
-           "plan_controller"]
+__all__ = ["CONTROL_BLOCK_MAX", "CONTROLLER_MIN_SNR_DB", "FILTER_NAMES", "ControllerPlan", "format_headroom_table",
+           "headroom", "plan_controller"]
 
 # Names of the generated filters: the runtime's control path includes them by these names.
 FILTER_NAMES = {"model": "ctl_s", "fb": "ctl_q", "ff": "ctl_w"}
 # The control path's processing latency is 2 blocks of 1 to 4 frames (firmware/anc_control.h).
 CONTROL_BLOCK_MAX = 4
+# A controller's filters are refused below this predicted SNR unless --min-snr says otherwise (dB).
+CONTROLLER_MIN_SNR_DB = 30.0
 PROCESSING_LATENCY_MIN = BOARD_LATENCY_SAMPLES
 _LABELS = {"model": "internal model S", "fb": "controller Q", "ff": "controller W"}
 
@@ -140,8 +142,8 @@ def headroom(plans: dict[str, Plan]) -> dict:
     return result
 
 
-def plan_controller(controller, *, variant: str = "both", min_snr: float = 30.0, quantiser: str = "efb",
-                    controller_file: str | None = None) -> ControllerPlan:
+def plan_controller(controller, *, variant: str = "both", min_snr: float = CONTROLLER_MIN_SNR_DB,
+                    quantiser: str = "efb", controller_file: str | None = None) -> ControllerPlan:
     """Plans of S_model, Q and W at the controller's rate; raises a CodegenError on refusal.
 
     ``controller`` is an :class:`anc.controller.Controller` or a path to its JSON. The

@@ -114,7 +114,7 @@ def _generate(parser, run):
 def _controller(parser, args, argv) -> int:
     """``--controller``: the control path's filters and their worst-case headroom table."""
     from codegen.api import generate_controller_firmware
-    from codegen.controller import format_headroom_table
+    from codegen.controller import CONTROLLER_MIN_SNR_DB, format_headroom_table
 
     # --min-snr given on the command line applies; its model default (80) does not.
     given = argparse.ArgumentParser(add_help=False)
@@ -129,7 +129,8 @@ def _controller(parser, args, argv) -> int:
               "controller's rate under fixed names)", file=sys.stderr)
         return 2
     manifest = _generate(parser, lambda: generate_controller_firmware(
-        args.controller, args.output, variant=args.variant, min_snr=30.0 if min_snr is None else min_snr,
+        args.controller, args.output, variant=args.variant,
+        min_snr=CONTROLLER_MIN_SNR_DB if min_snr is None else min_snr,
         quantiser=args.quantiser, force=args.force, progress=None if args.quiet else terminal_progress()))
     if isinstance(manifest, int):
         return manifest
