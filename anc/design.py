@@ -8,7 +8,9 @@ under the amplification limit per band and r95 |G Q| <= 0.5, then balanced trunc
 balanced truncation); (4) the limits the paths allow for this noise at this latency
 (``anc.limits.feedforward_limits``: causal Wiener feed-forward bound, coherence bound, what limits
 each band) beside the feedback bound; (5) predictions per band (``anc.prediction``) for W alone, Q
-alone and both, made with the filters as stored.
+alone and both, made with the filters as stored. Steps 2-4 take the noise as the models see it
+(``Disturbance.modelled``), the predictions the recording's own chin-to-ear path: the FF model and what the
+recording holds beyond it (``anc.disturbance``).
 
 The criterion is the ear noise of the user's recording with ANC off (``anc.disturbance.from_recording``
 with the FF model, ``helmet-anc design --disturbance``); without one, the documented default spectrum
@@ -318,6 +320,8 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     if ff_model is not None:
         model_uncertainty(ff_model)  # refuses an FF model whose error is unknown, as for the FB model
     disturbance = disturbance or default_disturbance(fb_model.fs, ff_model)
+    # Designed on the noise as the models see it, predicted on the recording's own path (module docstring).
+    modelled = disturbance.modelled()
     uncertainty = uncertainty or model_uncertainty(fb_model)
     order_budget = {} if options.max_order is None else {"max_order": options.max_order}
     notes: list[str] = []
@@ -330,13 +334,13 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     fb_notes: list[str] = []  # the notes of the Q that is kept (it may be designed again at the board's cap)
     if options.feedback:
         t0 = time.process_time()
-        fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
+        fb_design = design_feedback(fb_model, modelled, options.latency, uncertainty,
                                     options.max_amplification_db, **order_budget)
         if options.max_order is None and options.fit_board:
             # Q alone on the board first; W, designed around Q's loop, is fitted to what Q leaves below.
             q_fits, _ = board_orders(fb_model.order, fb_design.filter.order, 0)
             if q_fits < fb_design.filter.order:
-                fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
+                fb_design = design_feedback(fb_model, modelled, options.latency, uncertainty,
                                             options.max_amplification_db, max_order=q_fits)
         timing["feedback"] = time.process_time() - t0
         fb, fb_bound = fb_design.filter, fb_design.bound
@@ -351,13 +355,13 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
     ff_limits = None
     if disturbance.has_reference or ff_model is not None:
         t0 = time.process_time()
-        ff_limits = feedforward_limits(fb_model, disturbance, options.latency, ff_model=ff_model,
+        ff_limits = feedforward_limits(fb_model, modelled, options.latency, ff_model=ff_model,
                                        max_amplification_db=options.max_amplification_db,
                                        max_gain_db=options.max_ff_gain_db)
         timing["limits"] = time.process_time() - t0
     if options.feedforward and disturbance.has_reference:
         t0 = time.process_time()
-        ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty, feedback_loop=loop_fn,
+        ff_design = design_feedforward(fb_model, modelled, options.latency, uncertainty, feedback_loop=loop_fn,
                                        ff_model=ff_model, max_gain_db=options.max_ff_gain_db,
                                        max_amplification_db=options.max_amplification_db,
                                        loop_poles=_loop_poles(fb_model, fb, options.latency), **order_budget)
@@ -366,14 +370,14 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
             q_fits, w_fits = board_orders(fb_model.order, q_order, ff_design.filter.order)
             if q_fits < q_order:
                 # Both do not fit: Q gets its share, W the rest, each designed again at its cap.
-                fb_design = design_feedback(fb_model, disturbance, options.latency, uncertainty,
+                fb_design = design_feedback(fb_model, modelled, options.latency, uncertainty,
                                             options.max_amplification_db, max_order=max(q_fits, 3))
                 fb, fb_bound = fb_design.filter, fb_design.bound
                 margins = _margins(fb_design.margins, fb_design.loop)
                 truncation["fb"] = dict(fb_design.reduction)
                 fb_notes = list(fb_design.notes)
             if w_fits < ff_design.filter.order or q_fits < q_order:
-                ff_design = design_feedforward(fb_model, disturbance, options.latency, uncertainty,
+                ff_design = design_feedforward(fb_model, modelled, options.latency, uncertainty,
                                                feedback_loop=loop_fn, ff_model=ff_model,
                                                max_gain_db=options.max_ff_gain_db,
                                                max_amplification_db=options.max_amplification_db, max_order=w_fits,
@@ -393,7 +397,7 @@ def design(fb_model: Model, ff_model: Model | None = None, disturbance: Disturba
                  f"{BOARD_CYCLES_PER_SAMPLE} cycles (half of a 168 MHz Cortex-M4 at 48 kHz)"
                  + ("" if fits else ": it does NOT fit; design again with DesignOptions(max_order=...) for the "
                     "order that fits, at the attenuation that costs"))
-    drive = drive_level(fb_model, disturbance, fb, ff)
+    drive = drive_level(fb_model, modelled, fb, ff)
     if drive["scale"] < 1.0 and options.drive_limit:
         fb, ff, margins = _within_drive_limit(drive["scale"], fb, ff, margins, fb_design if fb is not None else None)
         # The drive is linear in Q and W: its level scales with them (the peaks now at the limit).

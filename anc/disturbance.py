@@ -24,8 +24,25 @@ fs/2 and the feed-forward design spend its filter there.
 
 A recording and the FF model (``from_recording(..., ff_model=P)``): the ear noise not coherent
 with the chin is then measured in the time domain, as the recording's residual through the model,
-r = d - P_model x (``residual_psd``), and the coherent part is P_model x at any frequency
-(``ff_model``: ``at`` evaluates P there, its gain capped outside its band as above). Welch's own
+r = d - P_model x, and the coherent part is P_model x at any frequency (``ff_model``: ``at``
+evaluates P there, its gain capped outside its band as above) plus what the residual still holds
+of the chin: the path the model misses, E = w S_xr / S_xx (``model_error``, Welch), the H1
+estimate shrunk where it is noise (Bendat & Piersol, "Random Data", 4th ed., sec. 9.2): with K
+segments the residual's coherence with the chin, gamma^2 = |S_xr|^2 / (S_xx S_rr), reads 1 / K
+where there is none, so g = (K gamma^2 - 1) / (K - 1) (at least 0) is its unbiased value and
+w = K g / (K g + 1 - g) the Wiener weight of an estimate whose variance is (1 - g) / (K g) of
+its power: w -> 1 where the missed path stands out, 0 where the residual is noise or the chin
+silent. The ear power not coherent with the chin is the rest, S_rr - |E|^2 S_xx = S_rr (1 -
+w^2 gamma^2) (``incoherent_psd``; ``residual_psd`` keeps S_rr, ``model_error_psd`` |E|^2 S_xx).
+The predictions (``anc.design.predict``) use E: counted as incoherent it lost its phase, and a
+filter that cancels P_model partly, leaving c, leaves |c + E|^2 S_xx, not |c|^2 + |E|^2 S_xx: the
+prediction missed random pair 8/1012's 50 Hz band by 5.8 dB (a model error 27 dB down, judged
+28.6 dB, predicted 22.8; with E 29.1). The ear power without control is then the recording's own
+(|P_model|^2 + |E|^2 left out 2 Re(P_model E*): 0.9 dB for a model 10 % low). The design does not (``modelled``: E back in the residual,
+the disturbance as the models see it): a filter has to be realised from the paths' poles, and
+with E in its target W gained the detail of a 10 Hz Welch estimate and lost 17-37 dB of its
+round-off SNR (random pairs 13 and 7: Q15 44.0 -> 26.6 and 23.3 -> -13.3 dB) for no gain at the
+ear (mean "both" 0.1-1.2 dB lower on 9 of 14 pairs). Welch's own
 coherence cannot see a -40 dB incoherent floor behind a delayed path: with 0.1 s segments a
 chin path 37 samples long (random helmet 1012) reads as a 16-28 dB coherence bound, the
 window's bias, and its 10 Hz bins smear a mode of Q 50 at 30 Hz. The residual also holds what
@@ -34,7 +51,7 @@ the model misses of the recorded path, which a filter designed on the model cann
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.signal
@@ -67,6 +84,10 @@ class Disturbance:
     residual_psd: np.ndarray | None = None
     # The chin-to-ear model the coherent part comes from (``from_recording`` with an FF model); None: the spectra.
     ff_model: Model | None = None
+    # What the recording's chin-to-ear path has beyond ``ff_model`` (complex, on frequencies_hz) and its PSD at the
+    # ear (FS^2/Hz), part of ``residual_psd`` (module docstring); None: nothing is known beyond the model.
+    model_error: np.ndarray | None = None
+    model_error_psd: np.ndarray | None = None
 
     def at(self, frequencies_hz) -> "Disturbance":
         """The same spectra linearly interpolated onto other frequencies (Hz); with an ``ff_model``, its
@@ -82,11 +103,21 @@ class Disturbance:
 
         if self.ff_model is not None:
             reference, residual = interp(self.reference_psd), interp(self.residual_psd)
-            P = _vouched(self.ff_model, f)
-            return Disturbance(f, np.abs(P) ** 2 * reference + residual, reference, P * reference, dict(self.source),
-                               residual, self.ff_model)
+            error, error_psd = interp(self.model_error), interp(self.model_error_psd)
+            P, incoherent = _vouched(self.ff_model, f), residual
+            if error is not None:
+                P, incoherent = P + error, residual - error_psd
+            return Disturbance(f, np.abs(P) ** 2 * reference + incoherent, reference, P * reference, dict(self.source),
+                               residual, self.ff_model, error, error_psd)
         return Disturbance(f, interp(self.ear_psd), interp(self.reference_psd), interp(self.cross_psd), dict(self.source),
                            interp(self.residual_psd))
+
+    def modelled(self) -> "Disturbance":
+        """The disturbance as the FF model sees it: what the recording's path has beyond the model counted as
+        noise not coherent with the chin (module docstring); itself when nothing is known beyond the model."""
+        if self.model_error is None:
+            return self
+        return replace(self, model_error=None, model_error_psd=None).at(self.frequencies_hz)
 
     @property
     def has_reference(self) -> bool:
@@ -101,7 +132,7 @@ class Disturbance:
         if not self.has_reference:
             return self.ear_psd
         if self.residual_psd is not None:
-            return self.residual_psd
+            return self.residual_psd if self.model_error_psd is None else self.residual_psd - self.model_error_psd
         coherent = np.abs(self.cross_psd) ** 2 / np.maximum(self.reference_psd, 1e-300)
         return np.maximum(self.ear_psd - coherent, 0.0)
 
@@ -159,9 +190,9 @@ def from_recording(recording, fs_expected: float | None = None, segment_s: float
     ``recording`` is a ``sysid.io.recordings.Recording`` (fields u = chin, y = ear, fs, path).
     Hann segments of ``segment_s`` seconds, half overlap. The cross spectrum is E[D X*]
     (scipy's ``csd(x, y)`` returns E[X* Y], i.e. E[Y X*] with y = ear). With ``ff_model`` (at the
-    recording's rate) the incoherent part is the Welch PSD of the residual d - P_model x after the
-    model's start-up (five time constants of its slowest pole, at most a quarter of the recording),
-    and the coherent part is the model's (module docstring).
+    recording's rate) the residual d - P_model x after the model's start-up (five time constants of its
+    slowest pole, at most a quarter of the recording) gives the incoherent part and the path the model
+    misses, and the coherent part is the model's plus that (module docstring).
     """
     if fs_expected is not None and recording.fs != fs_expected:
         raise HelmetAncError(f"{recording.path}: sample rate {recording.fs:g} Hz differs from the model's "
@@ -181,9 +212,31 @@ def from_recording(recording, fs_expected: float | None = None, segment_s: float
                              f"{ff_model.fs:g} Hz; record at the model's rate")
     residual = np.asarray(recording.y, dtype=float) - ff_model.simulate(np.asarray(recording.u, dtype=float))
     start = min(_settling_samples(ff_model), recording.u.size // 4)
-    _, srr = scipy.signal.welch(residual[start:], recording.fs, nperseg=min(nperseg, residual.size - start))
-    source["coherent part"] = "the FF model; incoherent part: the residual through it"
-    return Disturbance(f, syy, sxx, sxy, source, srr, ff_model).at(f)
+    srr, error, error_psd = _model_error(np.asarray(recording.u, dtype=float)[start:], residual[start:],
+                                         recording.fs, min(nperseg, residual.size - start), stated_band(ff_model))
+    source["coherent part"] = ("the FF model and the chin-coherent part of the residual through it; incoherent part: "
+                               "the rest of that residual")
+    return Disturbance(f, syy, sxx, sxy, source, srr, ff_model, error, error_psd).at(f)
+
+
+def _model_error(x: np.ndarray, residual: np.ndarray, fs: float, nperseg: int,
+                 band_hz: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S_rr, E, |E|^2 S_xx) of the residual r through the FF model (module docstring), E = w S_xr / S_xx, on the
+    Welch grid of ``nperseg`` samples (Hann, half overlap). Outside ``band_hz``,
+    where the model is vouched for (an extrapolation beyond it, capped in ``at``), E is 0 and r all incoherent:
+    there the residual holds the model's own extrapolation, which E would put back uncapped."""
+    f, sxx = scipy.signal.welch(x, fs, nperseg=nperseg)
+    _, srr = scipy.signal.welch(residual, fs, nperseg=nperseg)
+    _, sxr = scipy.signal.csd(x, residual, fs, nperseg=nperseg)
+    segments = max(1 + (x.size - nperseg) // (nperseg // 2), 2)
+    power = sxx * srr
+    tiny = 1e-300 + 1e-24 * float(np.max(power, initial=0.0))
+    coherence = np.minimum(np.divide(np.abs(sxr) ** 2, power, out=np.zeros_like(power), where=power > tiny), 1.0)
+    unbiased = np.maximum(segments * coherence - 1.0, 0.0) / (segments - 1.0)
+    weight = segments * unbiased / (segments * unbiased + 1.0 - unbiased)
+    weight = np.where((f >= band_hz[0]) & (f <= band_hz[1]), weight, 0.0)
+    error = np.divide(weight * sxr, sxx, out=np.zeros_like(sxr), where=power > tiny)
+    return srr, error, srr * weight ** 2 * coherence
 
 
 def _settling_samples(model: Model) -> int:

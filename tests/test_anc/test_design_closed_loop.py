@@ -11,8 +11,7 @@ A design takes about 40 CPU-s (seed pair and random pair 7: 9-10 s the feedback 
 feed-forward fits in both bases, at the board's orders), minutes of wall time on a shared 2-core machine,
 so every pair is marked slow; the seed pair and random pairs 3 and 11 are the representative handful that
 belong in the default run once a design takes seconds (``REPRESENTATIVE``). The pairs that miss a check today,
-and why in physical terms, are in BENCHMARKS.md "W's band rule at the stated limit, and the bound within the design's
-rules" (random 1, 4, 6, 8, 9, 10, 12).
+and why in physical terms, are in BENCHMARKS.md "The prediction on the recorded path" (random 1, 4, 6, 7, 9, 10).
 """
 
 from __future__ import annotations
