@@ -47,7 +47,9 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-__all__ = ["LaguerreBasis", "KautzBasis", "StateBasis", "state_responses", "fit", "fit_blocks", "qr_blocks"]
+from sysid.core.lti import state_responses
+
+__all__ = ["LaguerreBasis", "KautzBasis", "StateBasis", "fit", "fit_blocks", "qr_blocks"]
 
 
 @dataclass(frozen=True)
@@ -289,22 +291,6 @@ class KautzBasis:
             gain = Dk[0, 0] * gain
             at += poles.size
         return A, B, c[1:].reshape(1, -1), c[:1].reshape(1, 1)
-
-
-def state_responses(A: np.ndarray, B: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """(n, len(z)) complex: (zI - A)^-1 B at many points z, by the complex Schur form A = U R U^H and back
-    substitution over all points at once, O(n^2) per point (the modal form is unreliable for the repeated
-    poles at the origin of a delay; a dense solve per point is O(n^3))."""
-    n = A.shape[0]
-    z = np.asarray(z, dtype=complex).reshape(-1)
-    if n == 0:
-        return np.zeros((0, z.size), dtype=complex)
-    R, U = scipy.linalg.schur(A, output="complex")
-    b = U.conj().T @ np.asarray(B, dtype=float)[:, 0]
-    x = np.zeros((n, z.size), dtype=complex)
-    for i in range(n - 1, -1, -1):
-        x[i] = (b[i] + R[i, i + 1:] @ x[i + 1:]) / (z - R[i, i])
-    return U @ x
 
 
 @dataclass(frozen=True)

@@ -38,11 +38,12 @@ The predictions (``anc.design.predict``) use E: counted as incoherent it lost it
 filter that cancels P_model partly, leaving c, leaves |c + E|^2 S_xx, not |c|^2 + |E|^2 S_xx: the
 prediction missed random pair 8/1012's 50 Hz band by 5.8 dB (a model error 27 dB down, judged
 28.6 dB, predicted 22.8; with E 29.1). The ear power without control is then the recording's own
-(|P_model|^2 + |E|^2 left out 2 Re(P_model E*): 0.9 dB for a model 10 % low). The design does not (``modelled``: E back in the residual,
-the disturbance as the models see it): a filter has to be realised from the paths' poles, and
-with E in its target W gained the detail of a 10 Hz Welch estimate and lost 17-37 dB of its
-round-off SNR (random pairs 13 and 7: Q15 44.0 -> 26.6 and 23.3 -> -13.3 dB) for no gain at the
-ear (mean "both" 0.1-1.2 dB lower on 9 of 14 pairs). Welch's own
+(|P_model|^2 + |E|^2 left out 2 Re(P_model E*): 0.9 dB for a model 10 % low). The design does
+not (``modelled``: E back in the residual, the disturbance as the models see it): a filter is
+realised from the paths' poles, and with E in its target W took on the detail of a 10 Hz Welch
+estimate and lost 17-37 dB of its round-off SNR (random pairs 13 and 7: Q15 44.0 -> 26.6 and
+23.3 -> -13.3 dB) for nothing at the ear (mean "both" up to 1.2 dB lower on 7 of 14 pairs, at
+most 0.25 dB higher on the rest). Welch's own
 coherence cannot see a -40 dB incoherent floor behind a delayed path: with 0.1 s segments a
 chin path 37 samples long (random helmet 1012) reads as a 16-28 dB coherence bound, the
 window's bias, and its 10 Hz bins smear a mode of Q 50 at 30 Hz. The residual also holds what

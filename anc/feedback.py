@@ -31,11 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from sysid.core.lti import minimal_balanced_realisation
+from sysid.core.lti import minimal_balanced_realisation, state_responses
 from sysid.core.model import Model
 from sysid.core.structures import series
 
-from .basis import state_responses
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
 from .feedback_bound import (JUDGED_HZ, LIMIT_BANDS, ROBUSTNESS_BOUND, FeedbackBound, FeedbackFamily, FeedbackProblem,
@@ -137,7 +136,7 @@ def _reduced(problem: FeedbackProblem, coefficients: np.ndarray, limit_dense: np
     search ends at the cap, and a truncation there that breaks a bound is scaled (t Q, 0 < t <= 1) to the
     largest t that keeps both (|1 + t G Q| <= (1 - t) + t |1 + G Q|, so a small enough t always does).
 
-    Each order is judged on its responses by ``anc.basis.state_responses`` (O(n^2) per point) and the
+    Each order is judged on its responses by ``sysid.core.lti.state_responses`` (O(n^2) per point) and the
     orders are searched by doubling, then bisection between the last two (the judged change shrinks with
     the order, not strictly; the order found keeps the bounds, a lower one might too)."""
     family = problem.family

@@ -60,10 +60,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from sysid.core.lti import minimal_balanced_realisation
+from sysid.core.lti import minimal_balanced_realisation, state_responses
 from sysid.core.model import Model
 
-from .basis import KautzBasis, StateBasis, state_responses
+from .basis import KautzBasis, StateBasis
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
 from .feedforward_fit import BandLevelFit, kautz_poles, path_poles, rule_ratios, spread
@@ -109,7 +109,7 @@ class FeedforwardDesign:
     notes: list[str] = field(default_factory=list)
 
 def _response(system, z: np.ndarray) -> np.ndarray:
-    """C (zI - A)^-1 B + D at many points z (``anc.basis.state_responses``)."""
+    """C (zI - A)^-1 B + D at many points z (``sysid.core.lti.state_responses``)."""
     A, B, C, D = system
     d = float(np.asarray(D).reshape(-1)[0])
     if A.shape[0] == 0:

@@ -18,7 +18,7 @@ import numpy as np
 import scipy.linalg
 
 from .response import (MAX_MODAL_CONDITION, ModalForm, as_siso, frequency_response, invariant_zeros, modal_form,
-                       modal_inverse, pole_residue_response, simulate)
+                       modal_inverse, pole_residue_response, simulate, state_responses)
 
 __all__ = [
     "ModalForm",
@@ -29,6 +29,7 @@ __all__ = [
     "pole_residue_response",
     "frequency_response",
     "simulate",
+    "state_responses",
     "invariant_zeros",
     "spectral_radius",
     "real_block_diagonal",

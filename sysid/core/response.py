@@ -28,6 +28,7 @@ __all__ = [
     "modal_inverse",
     "pole_residue_response",
     "simulate",
+    "state_responses",
 ]
 
 # Above this eigenvector condition number the modal form loses more than about
@@ -35,6 +36,8 @@ __all__ = [
 MAX_MODAL_CONDITION = 1e8
 # Points per block of ``pole_residue_response`` (its reciprocals, up to 30 poles, within 1 MB).
 _RESPONSE_CHUNK = 2048
+# Points per block of the Schur back substitution (n x points complex: 24 MB at 180 states).
+_SCHUR_CHUNK = 8192
 
 
 @dataclass(frozen=True)
@@ -113,25 +116,49 @@ def pole_residue_response(poles: np.ndarray, residues: np.ndarray, d, z: np.ndar
 
 
 def frequency_response(A, B, C, D, z: np.ndarray) -> np.ndarray:
-    """G(z) = C (zI - A)^-1 B + D at the complex points z (usually e^{j omega})."""
+    """G(z) = C (zI - A)^-1 B + D at the complex points z (usually e^{j omega}).
+
+    By the modal form where it is reliable, else by the complex Schur form A = U R U^H (backward stable) and
+    back substitution over blocks of points, O(n^2) per point where a solve per point is O(n^3): a designed Q of
+    180 states on the feed-forward design's 2^19-point grid (random pair 4/1005 of the control tests) took
+    200 of its 230 CPU-s by dense solves."""
     A, B, C, D = as_siso(A, B, C, D)
     z = np.asarray(z, dtype=complex)
     modal = modal_form(A, B, C, D)
     if modal.reliable:
         return pole_residue_response(modal.poles, modal.residues, D, z.reshape(-1)).reshape(z.shape)
-    # Hessenberg reduction keeps the per-frequency solve well conditioned.
-    H, Q = scipy.linalg.hessenberg(A, calc_q=True)
-    b = Q.T @ B[:, 0]
-    c = C[0] @ Q
-    n = A.shape[0]
+    R, U = scipy.linalg.schur(A, output="complex")
+    b, c = U.conj().T @ B[:, 0], C[0] @ U
     flat = z.reshape(-1)
     out = np.empty(flat.size, dtype=complex)
-    # Batched solves (one LAPACK call per chunk of frequencies, bounded memory).
-    for start in range(0, flat.size, 2048):
-        zk = flat[start:start + 2048]
-        pencil = zk[:, None, None] * np.eye(n) - H
-        out[start:start + zk.size] = np.linalg.solve(pencil, np.broadcast_to(b, (zk.size, n))[..., None])[..., 0] @ c + D
+    for start in range(0, flat.size, _SCHUR_CHUNK):
+        zk = flat[start:start + _SCHUR_CHUNK]
+        out[start:start + zk.size] = c @ _back_substitution(R, b, zk) + D
     return out.reshape(z.shape)
+
+
+def state_responses(A: np.ndarray, B: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(n, len(z)) complex: (zI - A)^-1 B at many points z, by the complex Schur form (``frequency_response``)."""
+    n = A.shape[0]
+    z = np.asarray(z, dtype=complex).reshape(-1)
+    if n == 0:
+        return np.zeros((0, z.size), dtype=complex)
+    R, U = scipy.linalg.schur(A, output="complex")
+    b = U.conj().T @ np.asarray(B, dtype=float)[:, 0]
+    out = np.empty((n, z.size), dtype=complex)
+    for start in range(0, z.size, _SCHUR_CHUNK):
+        zk = z[start:start + _SCHUR_CHUNK]
+        out[:, start:start + zk.size] = U @ _back_substitution(R, b, zk)
+    return out
+
+
+def _back_substitution(R: np.ndarray, b: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(n, len(z)): x with (z I - R) x = b for an upper triangular R, at every point z at once."""
+    n = R.shape[0]
+    x = np.zeros((n, z.size), dtype=complex)
+    for i in range(n - 1, -1, -1):
+        x[i] = (b[i] + R[i, i + 1:] @ x[i + 1:]) / (z - R[i, i])
+    return x
 
 
 def simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:

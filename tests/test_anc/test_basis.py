@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from anc.basis import KautzBasis, StateBasis, fit_blocks, state_responses
+from anc.basis import KautzBasis, StateBasis, fit_blocks
 
 FS = 48000.0
 POLES = [0.9, -0.3, 0.95 * np.exp(0.2j), 0.7 * np.exp(2.0j), 0.0]
@@ -45,7 +45,7 @@ def test_poles_outside_the_unit_circle_are_refused():
         raise AssertionError("a pole at 1.01 was accepted")
 
 
-def test_the_schur_state_responses_are_the_resolvent_and_the_state_basis_realises_its_sum():
+def test_the_state_basis_realises_its_sum():
     # A non-normal A with a repeated pole at the origin (a delay line) beside a resonance.
     A = np.zeros((5, 5))
     A[1, 0] = A[2, 1] = 1.0
@@ -54,7 +54,6 @@ def test_the_schur_state_responses_are_the_resolvent_and_the_state_basis_realise
     B = np.array([[1.0], [0.0], [0.0], [0.2], [0.0]])
     z = np.exp(2j * np.pi * np.linspace(0.0, 0.5, 33))
     direct = np.stack([np.linalg.solve(zk * np.eye(5) - A, B[:, 0]) for zk in z], axis=1)
-    np.testing.assert_allclose(state_responses(A, B, z), direct, rtol=1e-9, atol=1e-12)
     basis = StateBasis(A, B)
     c = np.linspace(1.0, -1.0, basis.size)
     _, _, Cb, Db = basis.statespace(c)

@@ -7,8 +7,8 @@ louder than the stated amplification limit. The bounds are the ones the controll
 (``Controller.limits``), so the check is against the limit the paths allow, never against the same
 design made on the true plants.
 
-A design takes about 40 CPU-s (seed pair and random pair 7: 9-10 s the feedback program, 27-28 s the
-feed-forward fits in both bases, at the board's orders), minutes of wall time on a shared 2-core machine,
+A design takes 14-47 CPU-s (BENCHMARKS.md "Frequency responses by the Schur form"), minutes of wall time on a
+shared 2-core machine with the judge's closed loops,
 so every pair is marked slow; the seed pair and random pairs 3 and 11 are the representative handful that
 belong in the default run once a design takes seconds (``REPRESENTATIVE``). The pairs that miss a check today,
 and why in physical terms, are in BENCHMARKS.md "The prediction on the recorded path" (random 1, 4, 6, 7, 9, 10).

@@ -44,8 +44,10 @@ class Case:
 def case(name: str) -> Case:
     pair = seed_pair() if name == "seed" else random_pair(int(name.split()[1]))
     s_model, p_model = identified(name)
-    bound = feedforward_limits(pair.s, from_recording(recording_with_anc_off(pair.p), ff_model=pair.p), LATENCY)
-    disturbance = from_recording(recording_with_anc_off(pair.p), ff_model=p_model)
+    # As ``anc.design`` designs: on the noise as the models see it (``Disturbance.modelled``).
+    recording = recording_with_anc_off(pair.p)
+    bound = feedforward_limits(pair.s, from_recording(recording, ff_model=pair.p).modelled(), LATENCY)
+    disturbance = from_recording(recording, ff_model=p_model).modelled()
     design = design_feedforward(s_model, disturbance, LATENCY, model_uncertainty(s_model))
     predicted = [float(v) for v in design.attenuation_db]
     controller = Controller(s_model.fs, s_model, design.filter, None, LATENCY, band_centres(),
@@ -94,7 +96,7 @@ def test_the_stored_filter_is_a_stable_reduction_of_the_fit():
 
 def test_a_capped_filter_keeps_the_cap_the_band_rule_and_says_what_it_costs():
     s_model, p_model = identified("seed")
-    disturbance = from_recording(recording_with_anc_off(seed_pair().p), ff_model=p_model)
+    disturbance = from_recording(recording_with_anc_off(seed_pair().p), ff_model=p_model).modelled()
     full = case("seed").design
     cap = 40
     capped = design_feedforward(s_model, disturbance, LATENCY, model_uncertainty(s_model), max_order=cap)
@@ -109,6 +111,6 @@ def test_a_capped_filter_keeps_the_cap_the_band_rule_and_says_what_it_costs():
 
 def test_a_cap_below_one_state_is_refused():
     s_model, p_model = identified("seed")
-    disturbance = from_recording(recording_with_anc_off(seed_pair().p), ff_model=p_model)
+    disturbance = from_recording(recording_with_anc_off(seed_pair().p), ff_model=p_model).modelled()
     with pytest.raises(ValueError, match="max_order"):
         design_feedforward(s_model, disturbance, LATENCY, max_order=0)

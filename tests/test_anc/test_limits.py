@@ -78,7 +78,7 @@ class TestCausalWiener:
 @pytest.fixture(scope="module")
 def seed_limits() -> Limits:
     pair = seed_pair()
-    disturbance = from_recording(recording_with_anc_off(pair.p), ff_model=pair.p)
+    disturbance = from_recording(recording_with_anc_off(pair.p), ff_model=pair.p).modelled()
     return feedforward_limits(pair.s, disturbance, 1)
 
 
@@ -114,7 +114,7 @@ class TestSeedLimits:
 
     def test_a_negative_latency_is_refused(self):
         pair = seed_pair()
-        disturbance = from_recording(recording_with_anc_off(pair.p, seconds=1.0), ff_model=pair.p)
+        disturbance = from_recording(recording_with_anc_off(pair.p, seconds=1.0), ff_model=pair.p).modelled()
         with pytest.raises(HelmetAncError, match="latency"):
             feedforward_limits(pair.s, disturbance, -1)
 

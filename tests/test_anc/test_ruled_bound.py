@@ -18,7 +18,7 @@ LIMIT_DB, GAIN_DB = 6.0, 30.0
 def problem() -> FeedforwardProblem:
     # The seed's true plants at latency 1: the Wiener filter has about 100 dB of gain outside 20 Hz-2 kHz.
     pair = seed_pair()
-    disturbance = from_recording(recording_with_anc_off(pair.p, seconds=2.0), ff_model=pair.p)
+    disturbance = from_recording(recording_with_anc_off(pair.p, seconds=2.0), ff_model=pair.p).modelled()
     return FeedforwardProblem(pair.s, disturbance, 1, pair.p)
 
 

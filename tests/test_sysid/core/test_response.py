@@ -22,6 +22,23 @@ class TestFrequencyResponse:
         # (zI - A)^-1 B with C = [1, 0]: 1 / (z - 0.5)^2.
         np.testing.assert_allclose(response.frequency_response(*JORDAN, Z), 1.0 / (Z - 0.5) ** 2, rtol=1e-10)
 
+    def test_a_delay_line_beside_a_resonance_over_several_blocks_of_points(self):
+        # A non-normal A with a repeated pole at the origin (a delay line) beside a resonance: the modal form is
+        # unreliable, the Schur back substitution answers, block by block, as a dense solve per point does.
+        A = np.zeros((5, 5))
+        A[1, 0] = A[2, 1] = 1.0
+        A[3:, 3:] = [[1.8, -0.9], [1.0, 0.0]]
+        A[3, 2] = 0.5
+        B = np.array([[1.0], [0.0], [0.0], [0.2], [0.0]])
+        C = np.array([[0.3, -1.0, 0.5, 0.2, 1.0]])
+        assert not response.modal_form(A, B, C, 0.1).reliable
+        z = np.exp(1j * np.linspace(0.0, np.pi, 3 * response._SCHUR_CHUNK + 5))
+        every = slice(None, None, 97)
+        direct = np.stack([np.linalg.solve(zk * np.eye(5) - A, B[:, 0]) for zk in z[every]], axis=1)
+        np.testing.assert_allclose(response.state_responses(A, B, z)[:, every], direct, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(response.frequency_response(A, B, C, 0.1, z)[every], C[0] @ direct + 0.1,
+                                   rtol=1e-9, atol=1e-12)
+
     def test_keeps_the_shape_of_z(self):
         z = Z[:12].reshape(3, 4)
         assert response.frequency_response(*FIRST_ORDER, z).shape == (3, 4)
