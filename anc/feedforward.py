@@ -67,7 +67,7 @@ from .basis import KautzBasis, StateBasis
 from .controller import StateSpaceFilter
 from .disturbance import Disturbance
 from .feedforward_fit import BandLevelFit, kautz_poles, path_poles, rule_ratios, spread
-from .limits import MAX_AMPLIFICATION_DB, MAX_GAIN_DB, FeedforwardProblem, regions
+from .limits import CHIN_FLOOR, MAX_AMPLIFICATION_DB, MAX_GAIN_DB, FeedforwardProblem, regions
 from .prediction import band_centres, band_grid
 from .uncertainty import Uncertainty
 
@@ -128,6 +128,23 @@ def allowed_ratio(problem: FeedforwardProblem, limit_db: float) -> np.ndarray:
     regions, W alone and, with a loop, W with Q; no limit outside the rule."""
     with_q = problem.off_with_loop if problem.loop is not None else None
     return np.where(problem.ruled, rule_ratios(problem.off, with_q, limit_db, BAND_TOLERANCE_DB), np.inf)
+
+
+def _louder_above(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> str | None:
+    """The note where W alone makes the ear more than ``limit_db`` louder above the bands (2 kHz to fs / 2) than
+    without it, for the chin spectrum the limits take there (the recording's, floored at ``CHIN_FLOOR`` of its
+    peak: a microphone's self-noise), else None. The band rule ends at the bands; above them only W's gain bound
+    holds, and a recording with no chin noise there does not show what self-noise or wind would do (the seed
+    pair's W: 51 dB at 2.2-4.5 kHz)."""
+    nb = problem.bands
+    louder = -problem.attenuation(W)[nb + 1:]
+    worst = int(np.argmax(louder))
+    if louder[worst] <= limit_db:
+        return None
+    lo, hi = regions(problem.fs)[nb + 1 + worst]
+    return (f"W makes the ear {louder[worst]:.0f} dB louder at {lo / 1000:.1f}-{hi / 1000:.1f} kHz than without it, "
+            f"for the chin noise the limits take there (the recording's, floored at {10 * np.log10(CHIN_FLOOR):.0f} dB "
+            "of its peak for a microphone's self-noise); above 2 kHz no band rule holds, only W's gain bound")
 
 
 def _excess(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> np.ndarray:
@@ -285,6 +302,9 @@ def _designed_in(basis: KautzBasis, problem: FeedforwardProblem, full: np.ndarra
         notes.append(f"W scaled by {t:.3f} to keep the band rule")
     achieved = problem.attenuation(W)[:nb]
     shortfall = np.max(np.where(problem.audible, reference - achieved, -np.inf))
+    above = _louder_above(problem, W, limit_db)
+    if above is not None:
+        notes.append(above)
     if capped:
         judged = np.array([JUDGED_HZ[0] <= centre <= JUDGED_HZ[1] for centre in band_centres()]) & problem.audible
         notes.append(f"W capped at {high} states (max_order): {np.mean((reference - achieved)[judged]):.2f} dB "

@@ -8,6 +8,7 @@ true plants (``anc.limits.feedforward_limits``).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -114,3 +115,30 @@ def test_a_cap_below_one_state_is_refused():
     disturbance = from_recording(recording_with_anc_off(seed_pair().p), ff_model=p_model).modelled()
     with pytest.raises(ValueError, match="max_order"):
         design_feedforward(s_model, disturbance, LATENCY, max_order=0)
+
+
+def test_the_notes_say_how_much_louder_w_makes_the_ear_above_the_bands():
+    """Above 2 kHz only W's gain bound holds; where the recording's chin is at its floor (-60 dB of its peak) the
+    seed pair's W makes the ear tens of dB louder there, which the note states. Checked here on a linear grid
+    from the paths: |P + z^-L S W|^2 against |P|^2 for the floored chin spectrum, the incoherent ear beside it."""
+    from anc.limits import CHIN_FLOOR
+    from anc.wiener import relative_floor
+
+    s_model, p_model = identified("seed")
+    recording = recording_with_anc_off(seed_pair().p)
+    disturbance = from_recording(recording, ff_model=p_model).modelled()
+    design = case("seed").design
+    notes = [n for n in design.notes if n.startswith("W makes the ear")]
+    assert len(notes) == 1, design.notes
+    louder, lo, hi = re.match(r"W makes the ear (\d+) dB louder at ([0-9.]+)-([0-9.]+) kHz", notes[0]).groups()
+    f = np.linspace(1000.0 * float(lo), 1000.0 * float(hi), 4000)
+    fs = s_model.fs
+    spectra = disturbance.at(np.fft.rfftfreq(2 ** 16, 1.0 / fs))
+    chin = np.interp(f, spectra.frequencies_hz, relative_floor(spectra.reference_psd, CHIN_FLOOR))
+    uu = np.interp(f, spectra.frequencies_hz, spectra.incoherent_psd())
+    P = p_model.frequency_response(f)
+    G = s_model.frequency_response(f) * np.exp(-2j * np.pi * f * LATENCY / fs)
+    GW = G * design.filter.frequency_response(f, fs)
+    measured = 10.0 * np.log10(np.sum(uu + chin * np.abs(P + GW) ** 2) / np.sum(uu + chin * np.abs(P) ** 2))
+    assert int(louder) > MAX_AMPLIFICATION_DB
+    assert abs(measured - int(louder)) <= 1.5, (measured, notes[0])
