@@ -43,10 +43,10 @@ not (``modelled``: E back in the residual, the disturbance as the models see it)
 realised from the paths' poles, and with E in its target W took on the detail of a 10 Hz Welch
 estimate and lost 17-37 dB of its round-off SNR (random pairs 13 and 7: Q15 44.0 -> 26.6 and
 23.3 -> -13.3 dB) for nothing at the ear (mean "both" up to 1.2 dB lower on 7 of 14 pairs, at
-most 0.25 dB higher on the rest). Welch's own
-coherence cannot see a -40 dB incoherent floor behind a delayed path: with 0.1 s segments a
-chin path 37 samples long (random helmet 1012) reads as a 16-28 dB coherence bound, the
-window's bias, and its 10 Hz bins smear a mode of Q 50 at 30 Hz. The residual also holds what
+most 0.25 dB higher on the rest). Welch's own coherence cannot see a -40 dB incoherent floor
+behind a delayed path: with 0.1 s segments a chin path 37 samples long (random helmet 1012)
+reads as a 16-28 dB coherence bound, the window's bias, and its 10 Hz bins smear a mode of Q 50
+at 30 Hz. The residual also holds what
 the model misses of the recorded path, which a filter designed on the model cannot cancel either.
 """
 
@@ -223,9 +223,9 @@ def from_recording(recording, fs_expected: float | None = None, segment_s: float
 def _model_error(x: np.ndarray, residual: np.ndarray, fs: float, nperseg: int,
                  band_hz: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S_rr, E, |E|^2 S_xx) of the residual r through the FF model (module docstring), E = w S_xr / S_xx, on the
-    Welch grid of ``nperseg`` samples (Hann, half overlap). Outside ``band_hz``,
-    where the model is vouched for (an extrapolation beyond it, capped in ``at``), E is 0 and r all incoherent:
-    there the residual holds the model's own extrapolation, which E would put back uncapped."""
+    Welch grid of ``nperseg`` samples (Hann, half overlap). Outside ``band_hz``, where the model is vouched for
+    (beyond it an extrapolation, capped in ``at``), E is 0 and r all incoherent: there the residual holds the
+    model's own extrapolation, which E would put back uncapped."""
     f, sxx = scipy.signal.welch(x, fs, nperseg=nperseg)
     _, srr = scipy.signal.welch(residual, fs, nperseg=nperseg)
     _, sxr = scipy.signal.csd(x, residual, fs, nperseg=nperseg)

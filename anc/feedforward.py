@@ -130,14 +130,14 @@ def allowed_ratio(problem: FeedforwardProblem, limit_db: float) -> np.ndarray:
     return np.where(problem.ruled, rule_ratios(problem.off, with_q, limit_db, BAND_TOLERANCE_DB), np.inf)
 
 
-def _louder_above(problem: FeedforwardProblem, W: np.ndarray, limit_db: float) -> str | None:
-    """The note where W alone makes the ear more than ``limit_db`` louder above the bands (2 kHz to fs / 2) than
-    without it, for the chin spectrum the limits take there (the recording's, floored at ``CHIN_FLOOR`` of its
-    peak: a microphone's self-noise), else None. The band rule ends at the bands; above them only W's gain bound
-    holds, and a recording with no chin noise there does not show what self-noise or wind would do (the seed
-    pair's W: 51 dB at 2.2-4.5 kHz)."""
+def _louder_above(problem: FeedforwardProblem, attenuation: np.ndarray, limit_db: float) -> str | None:
+    """The note where W alone (``attenuation``: ``problem.attenuation(W)``, every region) makes the ear more than
+    ``limit_db`` louder above the bands (2 kHz to fs / 2) than without it, for the chin spectrum the limits take
+    there (the recording's, floored at ``CHIN_FLOOR`` of its peak: a microphone's self-noise), else None. The band
+    rule ends at the bands; above them only W's gain bound holds, and a recording with no chin noise there does
+    not show what self-noise or wind would do (the seed pair's W: 51 dB at 2.2-4.5 kHz)."""
     nb = problem.bands
-    louder = -problem.attenuation(W)[nb + 1:]
+    louder = -attenuation[nb + 1:]
     worst = int(np.argmax(louder))
     if louder[worst] <= limit_db:
         return None
@@ -300,9 +300,10 @@ def _designed_in(basis: KautzBasis, problem: FeedforwardProblem, full: np.ndarra
         system = (system[0], system[1], system[2] * t, system[3] * t)
         W = W * t
         notes.append(f"W scaled by {t:.3f} to keep the band rule")
-    achieved = problem.attenuation(W)[:nb]
+    attenuation = problem.attenuation(W)
+    achieved = attenuation[:nb]
     shortfall = np.max(np.where(problem.audible, reference - achieved, -np.inf))
-    above = _louder_above(problem, W, limit_db)
+    above = _louder_above(problem, attenuation, limit_db)
     if above is not None:
         notes.append(above)
     if capped:
