@@ -18,7 +18,8 @@ generation"):
 
 The steps:
 
-``plan``        all of the above for one model, with the refusals; ``controller`` the
+``plan``        all of the above for one model, with the refusals (and the sections whose
+                round-off dominates moved to the end where that halves it); ``controller`` the
                 plans of a controller's S, Q and W (reads ``anc.controller``);
 ``context``     the plan as the plain dictionary the templates render;
 ``render``      the jinja2 templates (``codegen.templates``);

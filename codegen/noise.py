@@ -45,6 +45,7 @@ from .sections import Cascade, Section, cascade_response, impulse_l1, peak_grid
 __all__ = [
     "BAND_HZ",
     "Prediction",
+    "fixed_roundoff_terms",
     "node_margins",
     "predict_cmsis",
     "predict_cmsis_f32",
@@ -109,16 +110,33 @@ def _assemble(cascade: Cascade, quantised, fs: float, roundoff: float) -> Predic
 def predict_fixed(cascade: Cascade, design, fs: float) -> Prediction:
     """Prediction for the Q15 variant of :mod:`codegen.fixedpoint`."""
     w, _ = _grids(cascade, fs)
+    realised = _realised_fixed(design)
+    roundoff = Q15_NOISE + sum(_fixed_terms(realised, design, w))
+    return _assemble(cascade, realised, fs, roundoff)
+
+
+def fixed_roundoff_terms(cascade: Cascade, design, fs: float) -> list[float]:
+    """Per section of the Q15 variant, the round-off power (FS^2) its quantiser puts at the output (the terms
+    :func:`predict_fixed` sums)."""
+    w, _ = _grids(cascade, fs)
+    return _fixed_terms(_realised_fixed(design), design, w)
+
+
+def _realised_fixed(design) -> list[Section]:
+    """The Q15 variant's sections as they compute, the input polynomial's exponent in the first."""
     realised = [s.realised() for s in design.sections]
     if design.polynomial_exponent:
         first = realised[0]
         realised[0] = Section(b=tuple(v / 2.0**design.polynomial_exponent for v in first.b), a=first.a,
                               poles=first.poles, zeros=first.zeros)
+    return realised
+
+
+def _fixed_terms(realised, design, w: np.ndarray) -> list[float]:
     shaping = design.quantiser == "efb"
     # Section k's output lies on a grid of 2^g_k Q31 LSBs (codegen.fixedpoint).
-    roundoff = Q15_NOISE + sum((Q31_STEP * 2.0**section.guard) ** 2 / 12 * _noise_gain(realised, k, w, shaping)
-                               for k, section in enumerate(design.sections))
-    return _assemble(cascade, realised, fs, roundoff)
+    return [(Q31_STEP * 2.0**section.guard) ** 2 / 12 * _noise_gain(realised, k, w, shaping)
+            for k, section in enumerate(design.sections)]
 
 
 def _float_prediction(cascade: Cascade, realised, fs: float) -> Prediction:

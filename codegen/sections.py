@@ -1,7 +1,8 @@
 """Scaling of a realisation's second-order sections for the fixed- and floating-point filters.
 
 The sections themselves (pairing, ordering, relative degree) come from
-``sysid.core.sections``. Scaling makes the peak gain from the cascade input to the output
+``sysid.core.sections``; ``design_cascade`` takes another order of them when the plan
+(``codegen.plan``) moves the sections whose round-off dominates. Scaling makes the peak gain from the cascade input to the output
 of each section but the last equal to the headroom (L-infinity norm by default, or
 the L1 norm of the impulse response, which rules out overflow for any input).
 Below the steps of firmware generation: a design module the plan runs after
@@ -41,6 +42,9 @@ class Cascade:
     headroom_db: float
     node_gains: tuple[float, ...]
     realisation_error: float
+    # The sections' order as positions in the paired order (``pair_sections``, farthest from the unit circle
+    # first); the identity unless the plan moved a section whose round-off dominated (``codegen.plan``).
+    order: tuple[int, ...] = ()
 
 
 def impulse_l1(sections, poles) -> float:
@@ -86,12 +90,13 @@ def scale_sections(sections, total_gain: float, scaling: str = "linf", headroom_
     return scaled, gains
 
 
-def design_cascade(realisation: Realisation, scaling: str = "linf", headroom_db: float = 6.0) -> Cascade:
+def design_cascade(realisation: Realisation, scaling: str = "linf", headroom_db: float = 6.0,
+                   order=None) -> Cascade:
     """Sections of the realised LTI core, ordered, with the model's gain and scaled.
 
-    The overall gain is the least-squares fit of the unit-gain cascade to the
-    state-space frequency response on the peak grid; the remaining relative error
-    is reported (it is round-off, about 1e-12, unless the zeros are ill-conditioned).
+    ``order``: the sections as positions in ``pair_sections``'s order (None: that order). The overall gain is
+    the least-squares fit of the unit-gain cascade to the state-space frequency response on the peak grid; the
+    remaining relative error is reported (it is round-off, about 1e-12, unless the zeros are ill-conditioned).
     """
     A, B, C, D = realisation.A, realisation.B, realisation.C, realisation.D
     if A.shape[0] == 0:
@@ -104,6 +109,10 @@ def design_cascade(realisation: Realisation, scaling: str = "linf", headroom_db:
             unit = [unit_section(p, z) for p, z in pair_sections(poles, zeros)]
         except ModelError as exc:
             raise CodegenError(str(exc)) from None
+    order = tuple(range(len(unit))) if order is None else tuple(int(k) for k in order)
+    if sorted(order) != list(range(len(unit))):
+        raise CodegenError(f"section order must be a permutation of 0..{len(unit) - 1}; found {list(order)}")
+    unit = [unit[k] for k in order]
     w = peak_grid(poles)
     target = lti.frequency_response(A, B, C, D, np.exp(1j * w))
     shape = cascade_response(unit, w)
@@ -113,4 +122,4 @@ def design_cascade(realisation: Realisation, scaling: str = "linf", headroom_db:
     scaled, gains = scale_sections(unit, total, scaling, headroom_db)
     error = float(np.max(np.abs(cascade_response(scaled, w) - target)) / np.max(np.abs(target)))
     return Cascade(sections=tuple(scaled), scaling=scaling, headroom_db=float(headroom_db),
-                   node_gains=tuple(float(g) for g in gains), realisation_error=error)
+                   node_gains=tuple(float(g) for g in gains), realisation_error=error, order=order)
