@@ -46,6 +46,7 @@ __all__ = [
     "BAND_HZ",
     "Prediction",
     "fixed_roundoff_terms",
+    "float32_roundoff_terms",
     "node_margins",
     "predict_cmsis",
     "predict_cmsis_f32",
@@ -177,6 +178,22 @@ def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
     input's difference count on their own powers. Every path continues through the sections
     after it.
     """
+    realised = [s.realised() for s in design.sections]
+    # The worst sine of the band.
+    return _assemble(cascade, realised, fs, float(np.max(np.sum(_float32_terms(cascade, design, fs), axis=0))))
+
+
+def float32_roundoff_terms(cascade: Cascade, design, fs: float) -> list[float]:
+    """Per section of the float32 variant, the round-off power (FS^2) it puts at the output at the band's worst
+    frequency for :func:`predict_float32` (the cascade input's own term left out)."""
+    terms = _float32_terms(cascade, design, fs)
+    worst = int(np.argmax(np.sum(terms, axis=0)))
+    return [float(v) for v in terms[1:, worst]]
+
+
+def _float32_terms(cascade: Cascade, design, fs: float) -> np.ndarray:
+    """(1 + sections, band points): the float32 round-off power at the output per band frequency of the cascade
+    input's difference and of each section (:func:`predict_float32`)."""
     w, band = _grids(cascade, fs)
     sections = list(cascade.sections)
     realised = [s.realised() for s in design.sections]
@@ -192,7 +209,7 @@ def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
     def gain(response) -> float:
         return float(np.trapezoid(np.abs(response) ** 2, w) / np.pi)
 
-    roundoff = relative * power(1 - 1 / z_band) * gain(cascade_response(sections, w))
+    terms = [relative * power(1 - 1 / z_band) * gain(cascade_response(sections, w))]
     for k, (section, floating) in enumerate(zip(sections, design.sections)):
         later = cascade_response(sections[k + 1:], w)
         before = cascade_response(sections, band, k)
@@ -208,21 +225,21 @@ def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
             forward, _ = _state_responses(floating, z_band)
             _, backward = _state_responses(floating, z)
             output_ops = 1 + 2 * sum(1 for v in floating.c if v != 0.0)
-            roundoff += relative * (output_ops * power(out) * gain(later)) + difference
+            term = relative * (output_ops * power(out) * gain(later)) + difference
             for i in range(2):
                 state = before * forward[i]
-                terms = sum(1 for v in floating.n[2 * i: 2 * i + 2] if v != 0.0) + (floating.g[i] != 0.0)
-                injected = max(0, 2 * terms - 1) * power(state * (z_band - 1)) + power(state)
-                roundoff += relative * injected * gain(backward[i] * later)
-            continue
-        roundoff += relative * numerator_ops * power(f) * through_poles
-        if floating.order == 1:
-            feedback_ops = 2 if floating.c[0] != 0.0 else 0
-            roundoff += relative * (feedback_ops * power(out * (1 - 1 / z_band)) + power(out)) * through_poles
+                count = sum(1 for v in floating.n[2 * i: 2 * i + 2] if v != 0.0) + (floating.g[i] != 0.0)
+                injected = max(0, 2 * count - 1) * power(state * (z_band - 1)) + power(state)
+                term = term + relative * injected * gain(backward[i] * later)
         else:
-            roundoff += difference
-    # The worst sine of the band.
-    return _assemble(cascade, realised, fs, float(np.max(roundoff)))
+            term = relative * numerator_ops * power(f) * through_poles
+            if floating.order == 1:
+                feedback_ops = 2 if floating.c[0] != 0.0 else 0
+                term = term + relative * (feedback_ops * power(out * (1 - 1 / z_band)) + power(out)) * through_poles
+            else:
+                term = term + difference
+        terms.append(term)
+    return np.array(terms)
 
 
 def predict_cmsis_f32(cascade: Cascade, tables, fs: float) -> Prediction:

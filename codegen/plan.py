@@ -38,6 +38,8 @@ TARGETS = tuple(_REGISTRY)
 _MOVED_AT_ONCE = 3
 _ROUNDS = 3
 _HALVED_DB = 10.0 * np.log10(2.0)
+# Per plan field, the round-off each section puts at the output.
+_ROUNDOFF_TERMS = {"fixed": noise.fixed_roundoff_terms, "floating": noise.float32_roundoff_terms}
 
 
 def model_hash(model: Model) -> str:
@@ -158,7 +160,7 @@ def plan_firmware(model: Model, *, variant: str = "both", fs: float | None = Non
         predictions = {key: predictions[key] for key in spec.variants if key in predictions}
         return cascade, designs, predictions, kernel_predictions
 
-    cascade, designs, predictions, kernel_predictions = _quietest_order(designed_in, realisation.fs)
+    cascade, designs, predictions, kernel_predictions = _quietest_order(designed_in, spec, realisation.fs)
     for key, prediction in predictions.items():
         if prediction.snr_db < min_snr:
             raise PrecisionError(refusal_reason(f"{key} variant", prediction, min_snr))
@@ -167,31 +169,33 @@ def plan_firmware(model: Model, *, variant: str = "both", fs: float | None = Non
                 kernel_predictions=kernel_predictions)
 
 
-def _quietest_order(designed_in, fs: float):
+def _quietest_order(designed_in, spec: Target, fs: float):
     """(cascade, designs, predictions, kernel predictions) in the paired order (``codegen.sections``: farthest
     from the unit circle first, the L-infinity scaling's order of least overflow), or with the sections whose
     round-off dominates moved to the end.
 
     A section's round-off passes every section after it. Where at most ``_MOVED_AT_ONCE`` sections hold more than
-    half of the Q15 round-off (``noise.fixed_roundoff_terms``; a target without the Q15 variant keeps the paired
-    order), the loudest one, two or three are moved last together (in their order), and the best of those orders
-    is kept if the worst variant's round-off at least halves (``_HALVED_DB``, the gain of taking the dominant
-    terms out); then again, at most ``_ROUNDS`` times. Random helmet 7/1012's feed-forward W (45 sections): two
-    pole pairs of radius 0.68-0.69 at 17-19 kHz, one with a zero at z = 1.003, second and third, gave 96 % of the
-    Q15 round-off (predicted SNR 23.3 dB, float32 37.1 dB); both moved last, 53.6 and 65.4 dB, and after the next
-    round 56.8 and 65.4 dB. The loudest alone moved last gave 14.9 dB: the other then takes its scaling.
+    half of the worst variant's round-off (``_ROUNDOFF_TERMS``; a variant without per-section terms, cmsis's,
+    keeps the paired order), the loudest one, two or three are moved last together (in their order), and the
+    best of those orders is kept if the worst variant's round-off at least halves (``_HALVED_DB``, the gain of
+    taking the dominant terms out); then again, at most ``_ROUNDS`` times. Random helmet 7/1012's feed-forward W
+    (45 sections): two pole pairs of radius 0.68-0.69 at 17-19 kHz, one with a zero at z = 1.003, second and
+    third, gave 96 % of the Q15 round-off (predicted SNR 23.3 dB, float32 37.1 dB); both moved last, 53.6 and
+    65.4 dB, and after the next round 56.8 and 65.4 dB. The loudest alone moved last gave 14.9 dB: the other then
+    takes its scaling.
     """
     result = designed_in(None)
-    if result[1].get("fixed") is None:
-        return result
     order = list(range(len(result[0].sections)))
     for _ in range(_ROUNDS):
         cascade, designs, predictions, _ = result
-        terms = np.array(noise.fixed_roundoff_terms(cascade, designs["fixed"], fs))
+        worst_key = min(predictions, key=lambda key: predictions[key].snr_db)
+        field = spec.variants[worst_key].plan_field
+        if field not in _ROUNDOFF_TERMS:
+            break
+        terms = np.array(_ROUNDOFF_TERMS[field](cascade, designs[field], fs))
         loudest = [int(k) for k in np.argsort(terms)[::-1][:_MOVED_AT_ONCE]]
         if np.sum(terms[loudest]) <= 0.5 * np.sum(terms):
             break
-        worst_key = min(predictions, key=lambda key: predictions[key].snr_db)
         best = predictions[worst_key].snr_db + _HALVED_DB
         chosen = None
         for count in range(1, len(loudest) + 1):

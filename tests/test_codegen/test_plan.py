@@ -21,18 +21,22 @@ from codegen.sections import cascade_response, design_cascade
 from codegen.targets import DesignInputs, get_target
 
 HALVED_DB = 10.0 * math.log10(2.0)
-# Random models (``conftest_codegen.random_stable_model``, path ff) whose Q15 round-off a few sections dominate
-# in the paired order, and one where it is spread.
-DOMINATED = [(13, 12), (41, 24)]
+# Random models (``conftest_codegen.random_stable_model``, path ff) whose round-off a few sections dominate in the
+# paired order (Q15 the worse variant, then float32), and one where it is spread.
+DOMINATED = [(13, 12), (41, 24), (76, 24)]
 SPREAD = (1, 12)
+TERMS = {"q15": noise.fixed_roundoff_terms, "float": noise.float32_roundoff_terms}
 
 
-def _paired_worst_snr(plan) -> float:
-    """The worst variant's predicted SNR (dB) of the plan's realisation in the paired order."""
+def _paired(plan) -> tuple[str, float, np.ndarray]:
+    """In the paired order: the worst variant, its predicted SNR (dB) and its round-off per section."""
     cascade = design_cascade(plan.realisation, order=None)
     inputs = DesignInputs(cascade=cascade, realisation=plan.realisation, polynomial=None, quantiser="efb",
                           min_snr=-math.inf)
-    return min(v.design(inputs).prediction.snr_db for v in get_target("generic").selected("both"))
+    designed = {v.key: v.design(inputs) for v in get_target("generic").selected("both")}
+    worst = min(designed, key=lambda key: designed[key].prediction.snr_db)
+    terms = np.array(TERMS[worst](cascade, designed[worst].design, plan.realisation.fs))
+    return worst, designed[worst].prediction.snr_db, terms
 
 
 @pytest.mark.parametrize("seed, order", DOMINATED)
@@ -41,20 +45,23 @@ def test_dominant_sections_move_last_where_that_halves_the_round_off(seed, order
     sections = len(plan.cascade.sections)
     assert plan.cascade.order != tuple(range(sections))
     assert sorted(plan.cascade.order) == list(range(sections))
-    worst = min(p.snr_db for p in plan.predictions.values())
-    assert worst >= _paired_worst_snr(plan) + HALVED_DB
-    # The moved sections are among the loudest three of the paired order, which held more than half of the
-    # round-off.
-    paired = design_cascade(plan.realisation)
-    inputs = DesignInputs(cascade=paired, realisation=plan.realisation, polynomial=None, quantiser="efb",
-                          min_snr=-math.inf)
-    terms = np.array(noise.fixed_roundoff_terms(paired, get_target("generic").variants["q15"].design(inputs).design,
-                                                plan.realisation.fs))
+    worst_key, paired_snr, terms = _paired(plan)
+    assert min(p.snr_db for p in plan.predictions.values()) >= paired_snr + HALVED_DB
+    # The moved sections are among the loudest three of the paired order's worst variant, which held more than
+    # half of its round-off.
     loudest = np.argsort(terms)[::-1][:3]
     assert np.sum(terms[loudest]) > 0.5 * np.sum(terms)
     order = plan.cascade.order
     moved = {k for i, k in enumerate(order) if any(j > k for j in order[:i])}
     assert moved and moved <= set(loudest.tolist())
+
+
+def test_the_worse_variant_chooses_the_sections():
+    """Where float32 is the worse variant its own round-off picks the sections, and it is float32 that gains."""
+    plan = plan_firmware(random_stable_model(*DOMINATED[2], path="ff"), min_snr=-math.inf)
+    worst_key, paired_snr, _ = _paired(plan)
+    assert worst_key == "float"
+    assert plan.predictions["float"].snr_db >= paired_snr + HALVED_DB
 
 
 def test_spread_round_off_keeps_the_paired_order():
@@ -95,3 +102,17 @@ def test_an_order_that_is_not_a_permutation_is_refused():
     plan = plan_firmware(random_stable_model(*SPREAD, path="ff"), min_snr=-math.inf)
     with pytest.raises(CodegenError, match="permutation"):
         design_cascade(plan.realisation, order=[0, 0, 1, 2, 3, 4])
+
+
+@pytest.mark.parametrize("seed, order", DOMINATED)
+def test_the_terms_are_the_predictions_parts(seed, order):
+    """The per-section terms add up to the predicted round-off: with the output quantiser for Q15, and with the
+    cascade input's own term at the band's worst frequency for float32."""
+    plan = plan_firmware(random_stable_model(seed, order, path="ff"), min_snr=-math.inf)
+    fs = plan.realisation.fs
+    fixed = noise.fixed_roundoff_terms(plan.cascade, plan.fixed, fs)
+    assert noise.Q15_NOISE + sum(fixed) == pytest.approx(plan.predictions["q15"].roundoff_power, rel=1e-12)
+    floating = noise.float32_roundoff_terms(plan.cascade, plan.floating, fs)
+    assert len(floating) == len(plan.cascade.sections) and min(floating) >= 0.0
+    total = plan.predictions["float"].roundoff_power
+    assert 0.0 < sum(floating) <= total * (1.0 + 1e-12)
