@@ -2,9 +2,10 @@
 
 The sections themselves (pairing, ordering, relative degree) come from
 ``sysid.core.sections``; ``design_cascade`` takes another order of them when the plan
-(``codegen.plan``) moves the sections whose round-off dominates. Scaling makes the peak gain from the cascade input to the output
-of each section but the last equal to the headroom (L-infinity norm by default, or
-the L1 norm of the impulse response, which rules out overflow for any input).
+(``codegen.plan``) moves the sections whose round-off dominates. Scaling makes the peak
+gain from the cascade input to the output of each section but the last equal to the
+headroom (L-infinity norm by default, or the L1 norm of the impulse response, which rules
+out overflow for any input).
 Below the steps of firmware generation: a design module the plan runs after
 :mod:`codegen.realise`, the only module of ``codegen`` it imports besides the errors.
 """
