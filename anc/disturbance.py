@@ -46,8 +46,8 @@ estimate and lost 17-37 dB of its round-off SNR (random pairs 13 and 7: Q15 44.0
 most 0.25 dB higher on the rest). Welch's own coherence cannot see a -40 dB incoherent floor
 behind a delayed path: with 0.1 s segments a chin path 37 samples long (random helmet 1012)
 reads as a 16-28 dB coherence bound, the window's bias, and its 10 Hz bins smear a mode of Q 50
-at 30 Hz. The residual also holds what
-the model misses of the recorded path, which a filter designed on the model cannot cancel either.
+at 30 Hz. The residual also holds what the model misses of the recorded path, which a filter
+designed on the model cannot cancel either.
 """
 
 from __future__ import annotations
