@@ -11,7 +11,8 @@ design question about Q with bounds on |1 + G Q| and |G Q| is a convex program. 
     |1 + G Q| \\le 10^{A(f) / 20}, \\quad r_{95}(f) |G Q| \\le \\beta \\quad \\text{at every } f,
 
 the sum running over the third-octave bands ``JUDGED_HZ`` (50 Hz-1 kHz) on the points of
-``anc.prediction.band_grid`` (as ``anc.design.predict``), Phi_d the ear noise with ANC off:
+``anc.prediction.band_grid``, each band's sums integrals over linear frequency
+(``band_weights``, as ``anc.design.predict``), Phi_d the ear noise with ANC off:
 each band counts by its own power ratio, so no band dominates and none is sacrificed (the
 sum of ratios; a mean of decibels would reward deepening bands already deep). A(f) is the
 amplification limit of the third-octave band holding f (``amplification_limit``: default
@@ -47,7 +48,7 @@ from sysid.validation.compare import third_octave_bands
 from .disc_program import DiscProgram, solve_disc_program
 from .disturbance import Disturbance
 from .outer_factor import CIRCLE_MARGIN, OuterFactor, outer_factor
-from .prediction import BANDS, band_grid
+from .prediction import BANDS, band_grid, band_weights
 from .rational_basis import RationalBasis, basis_poles
 from .uncertainty import Uncertainty
 
@@ -154,7 +155,7 @@ class FeedbackProblem:
     latency: int
     bands_hz: np.ndarray
     objective_hz: np.ndarray          # (bands, points)
-    weights: np.ndarray               # (bands, points): Phi_d / band power
+    weights: np.ndarray               # (bands, points): Phi_d times the band integral's weights / band power
     objective_q: np.ndarray           # (bands * points, size)
     objective_g: np.ndarray
     dense_hz: np.ndarray
@@ -238,10 +239,11 @@ def feedback_problem(s_model: Model, disturbance: Disturbance, latency: int, unc
     f = objective_hz.reshape(-1)
     psd = np.maximum(disturbance.at(f).ear_psd, 0.0)
     psd = np.maximum(psd, 1e-9 * max(float(psd.max()), 1e-300)).reshape(objective_hz.shape)
+    power = psd * band_weights()[rows]
     dense = np.union1d(dense_grid(s_model), f)
     delay = lambda hz: np.exp(-2j * np.pi * hz * latency / fs)  # noqa: E731
     return FeedbackProblem(family, latency, np.array([BANDS[i][0] for i in rows]), objective_hz,
-                           psd / psd.sum(axis=1, keepdims=True), family.responses(f),
+                           power / power.sum(axis=1, keepdims=True), family.responses(f),
                            s_model.frequency_response(f) * delay(f), dense, family.responses(dense),
                            s_model.frequency_response(dense) * delay(dense),
                            10.0 ** (amplification_limit(dense, max_amplification_db) / 20.0), uncertainty.at(dense),

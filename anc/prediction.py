@@ -8,7 +8,12 @@ writing d = H x + u (``anc.disturbance``) and G = z^-L S_model:
 
 (Q = 0 or W = 0 for a filter that is off; without a reference Phi_uu = Phi_dd). The
 attenuation of a band is 10 log10 (integral of Phi_dd / integral of Phi_ee) over the band
-(positive = quieter), integrated on ``POINTS_PER_BAND`` log-spaced frequencies per band.
+(positive = quieter), the integrals over linear frequency (a band's power, as a third-octave
+filter or a spectrum's bins measure it) by the trapezoid rule on ``POINTS_PER_BAND`` log-spaced
+frequencies per band (``band_weights``). Summing the log-spaced points unweighted would integrate
+over log frequency instead, weighting a band's low edge 1.26 times its high edge: with a notch
+inside the band that put random pair 7/1012's 50 Hz band 0.8 dB shallower than its power integral
+(22.4 against 23.2 dB with the true paths; the closed loop measured 23.9).
 Overall dB(A): the same ratio with the IEC 61672-1 A-weighting over 20 Hz - 10 kHz.
 Coherence bound: the most any feed-forward filter can remove, 10 log10(Phi_dd / Phi_uu)
 = -10 log10(1 - coh^2).
@@ -22,8 +27,8 @@ from sysid.validation.compare import third_octave_bands
 
 from .disturbance import Disturbance
 
-__all__ = ["BANDS", "band_centres", "band_grid", "ear_psd", "band_attenuation", "overall_dba", "a_weighting",
-           "coherence_bound", "drive_psd"]
+__all__ = ["BANDS", "band_centres", "band_grid", "band_weights", "ear_psd", "band_attenuation", "overall_dba",
+           "a_weighting", "coherence_bound", "drive_psd"]
 
 BANDS = third_octave_bands(20.0, 2000.0)
 POINTS_PER_BAND = 24
@@ -38,6 +43,17 @@ def band_centres() -> list[float]:
 def band_grid() -> np.ndarray:
     """(bands, POINTS_PER_BAND) log-spaced frequencies (Hz) inside each band."""
     return np.array([np.geomspace(lo, hi, POINTS_PER_BAND) for _, lo, hi in BANDS])
+
+
+def band_weights() -> np.ndarray:
+    """(bands, POINTS_PER_BAND) trapezoid weights (Hz) on ``band_grid()``: the sum over a row of weights
+    times a PSD is the PSD's integral over the band in linear frequency, the band's power."""
+    grid = band_grid()
+    steps = np.diff(grid, axis=1) / 2.0
+    weights = np.zeros_like(grid)
+    weights[:, :-1] += steps
+    weights[:, 1:] += steps
+    return weights
 
 
 def a_weighting(frequencies_hz) -> np.ndarray:
@@ -76,8 +92,10 @@ def _ratio_db(off: np.ndarray, on: np.ndarray) -> float:
 
 
 def band_attenuation(off: np.ndarray, on: np.ndarray) -> list[float]:
-    """Per-band attenuation (dB) from PSDs on ``band_grid()`` (same shape: bands x points)."""
-    return [_ratio_db(a, b) for a, b in zip(off, on)]
+    """Per-band attenuation (dB) from PSDs on ``band_grid()`` (same shape: bands x points), each band's
+    power integrated over linear frequency (``band_weights``)."""
+    weights = band_weights()
+    return [_ratio_db(w * a, w * b) for w, a, b in zip(weights, off, on)]
 
 
 def overall_dba(frequencies_hz: np.ndarray, off: np.ndarray, on: np.ndarray) -> float:
