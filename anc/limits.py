@@ -7,9 +7,9 @@ gives per band of ``anc.prediction``:
 
 * the causal Wiener feed-forward bound: the attenuation of the best causal filter of any
   length (design.md "Control"; ``anc.wiener.causal_wiener``), computed on a dense FFT grid
-  (``FeedforwardProblem``), for the ear power in the measure ``anc.prediction`` sums the bands in
-  (the same number of log-spaced points in every third-octave band: weight V = 1 / f inside
-  20 Hz-2 kHz, ``band_measure``). Outside the bands V is ``OUTSIDE_WEIGHT`` times its value at the
+  (``FeedforwardProblem``), for the ear power weighted so that every third-octave band counts
+  alike (weight V = 1 / f inside 20 Hz-2 kHz, ``band_measure``; each band's attenuation is then
+  its power over linear frequency, as ``anc.prediction`` integrates it). Outside the bands V is ``OUTSIDE_WEIGHT`` times its value at the
   top band edge: the bound is the best in-band result that does not buy it with noise outside.
   With V = 1 (the ear power on a linear grid, pink noise's low bands) the seed pair's mean
   50 Hz-1 kHz is 1.6 dB; with the band measure 11.6 dB (the reference value 11.2 dB); it depends
