@@ -39,23 +39,16 @@ RANDOM_PASSING = 8
 REPRESENTATIVE = ["seed", "random 3", "random 11"]
 OTHERS = [f"random {seed}" for seed in RANDOM_FB_SEEDS if f"random {seed}" not in REPRESENTATIVE]
 # The checks missed today (pair, check), and what limits them (BENCHMARKS.md "A band's power over linear frequency").
+BOTH, PREDICTED = "both_at_causal_bound", "as_predicted_every_band"
 MISSES = {
-    ("random 1", "both"): "the design's rules: the bound within them is 17.9 dB against 25 needed",
-    ("random 4", "both"): "the design's rules: the bound within them with Q in the loop is 18.4 dB against 19.3 needed",
-    ("random 9", "both"): "the design's rules: the bound within them is 5.7 dB against 12.4 needed",
-    ("random 10", "both"): "the design's rules: the bound within them is 2.3 dB against 6.6 needed",
-    ("random 6", "predicted"): "the 500 Hz band 2.2 dB deeper than predicted: S's model error (0.1 dB with the true S)",
-    ("random 9", "predicted"): "the 50 Hz band, cancelled 25 dB deep, reads 4.1 dB shallower through the judge's 0.5 s "
-                               "Welch segments (0.4-1.1 dB with 1-7.75 s segments)",
+    ("random 1", BOTH): "the design's rules: the bound within them is 17.9 dB against 25 needed",
+    ("random 4", BOTH): "the design's rules: the bound within them with Q in the loop is 18.4 dB against 19.3 needed",
+    ("random 9", BOTH): "the design's rules: the bound within them is 5.7 dB against 12.4 needed",
+    ("random 10", BOTH): "the design's rules: the bound within them is 2.3 dB against 6.6 needed",
+    ("random 6", PREDICTED): "the 500 Hz band 2.2 dB deeper than predicted: S's model error (0.1 dB with the true S)",
+    ("random 9", PREDICTED): "the 50 Hz band, cancelled 25 dB deep, reads 4.1 dB shallower through the judge's 0.5 s "
+                             "Welch segments (0.4-1.1 dB with 1-7.75 s segments)",
 }
-
-
-def _names(check: str) -> list:
-    """Every pair, slow, the ones that miss ``check`` today expected to fail (``MISSES``)."""
-    return [pytest.param(name, marks=[pytest.mark.slow]
-                         + ([pytest.mark.xfail(reason=MISSES[name, check], strict=False)] if (name, check) in MISSES
-                            else []))
-            for name in REPRESENTATIVE + OTHERS]
 
 
 def _pair(name: str):
@@ -128,38 +121,21 @@ def _w_gain_above_bound(name: str) -> str | None:
     return None if gain_db <= bound + GRID_DB else f"{name}: W's mean-square gain below 20 Hz {gain_db:.1f} dB"
 
 
-CHECKS = {"stable": _unstable, "both": _both_short, "feedback": _feedback_short, "predicted": _mispredicted,
-          "louder": _louder_than_stated, "w_gain": _w_gain_above_bound}
+CHECKS = {"stable_on_true_plants": _unstable, BOTH: _both_short, "feedback_at_robust_bound": _feedback_short,
+          PREDICTED: _mispredicted, "no_band_louder_than_limit": _louder_than_stated,
+          "w_gain_bound_below_bands": _w_gain_above_bound}
 
 
-@pytest.mark.parametrize("name", _names("stable"))
-def test_stable_on_the_true_plants(name):
-    assert (failure := _unstable(name)) is None, failure
+def _cases() -> list:
+    """(check, pair) for every check and pair, slow; the checks a pair misses today expected to fail (``MISSES``)."""
+    return [pytest.param(check, name, id=f"{check}-{name}", marks=[pytest.mark.slow] + (
+                [pytest.mark.xfail(reason=MISSES[name, check], strict=False)] if (name, check) in MISSES else []))
+            for check in CHECKS for name in REPRESENTATIVE + OTHERS]
 
 
-@pytest.mark.parametrize("name", _names("both"))
-def test_both_reaches_the_causal_feedforward_bound(name):
-    assert (failure := _both_short(name)) is None, failure
-
-
-@pytest.mark.parametrize("name", _names("feedback"))
-def test_feedback_reaches_the_robust_bound(name):
-    assert (failure := _feedback_short(name)) is None, failure
-
-
-@pytest.mark.parametrize("name", _names("predicted"))
-def test_achieved_as_predicted_in_every_band(name):
-    assert (failure := _mispredicted(name)) is None, failure
-
-
-@pytest.mark.parametrize("name", _names("louder"))
-def test_no_band_louder_than_the_stated_limit(name):
-    assert (failure := _louder_than_stated(name)) is None, failure
-
-
-@pytest.mark.parametrize("name", _names("w_gain"))
-def test_w_keeps_its_gain_bound_below_the_bands(name):
-    assert (failure := _w_gain_above_bound(name)) is None, failure
+@pytest.mark.parametrize("check, name", _cases())
+def test_pair_passes_check(check, name):
+    assert (failure := CHECKS[check](name)) is None, failure
 
 
 @pytest.mark.slow
