@@ -11,7 +11,7 @@ design question about Q with bounds on |1 + G Q| and |G Q| is a convex program. 
     |1 + G Q| \\le 10^{A(f) / 20}, \\quad r_{95}(f) |G Q| \\le \\beta \\quad \\text{at every } f,
 
 the sum running over the third-octave bands ``JUDGED_HZ`` (50 Hz-1 kHz) on the points of
-``anc.prediction.band_grid``, each band's sums integrals over linear frequency
+``anc.prediction.band_grid``, each band's sums weighted to integrals over linear frequency
 (``band_weights``, as ``anc.design.predict``), Phi_d the ear noise with ANC off:
 each band counts by its own power ratio, so no band dominates and none is sacrificed (the
 sum of ratios; a mean of decibels would reward deepening bands already deep). A(f) is the

@@ -9,8 +9,9 @@ gives per band of ``anc.prediction``:
   length (design.md "Control"; ``anc.wiener.causal_wiener``), computed on a dense FFT grid
   (``FeedforwardProblem``), for the ear power weighted so that every third-octave band counts
   alike (weight V = 1 / f inside 20 Hz-2 kHz, ``band_measure``; each band's attenuation is then
-  its power over linear frequency, as ``anc.prediction`` integrates it). Outside the bands V is ``OUTSIDE_WEIGHT`` times its value at the
-  top band edge: the bound is the best in-band result that does not buy it with noise outside.
+  its power over linear frequency, as ``anc.prediction`` integrates it). Outside the bands V is
+  ``OUTSIDE_WEIGHT`` times its value at the top band edge: the bound is the best in-band result
+  that does not buy it with noise outside.
   With V = 1 (the ear power on a linear grid, pink noise's low bands) the seed pair's mean
   50 Hz-1 kHz is 1.6 dB; with the band measure 11.6 dB (the reference value 11.2 dB); it depends
   on the outside weight (1e-8: 16.2 dB, 1e-10: 19.0 dB on the seed, within 1.5 dB on random pairs
