@@ -180,23 +180,24 @@ def predict_float32(cascade: Cascade, design, fs: float) -> Prediction:
     """
     realised = [s.realised() for s in design.sections]
     # The worst sine of the band.
-    return _assemble(cascade, realised, fs, float(np.max(np.sum(_float32_terms(cascade, design, fs), axis=0))))
+    terms = _float32_terms(cascade, design, realised, fs)
+    return _assemble(cascade, realised, fs, float(np.max(np.sum(terms, axis=0))))
 
 
 def float32_roundoff_terms(cascade: Cascade, design, fs: float) -> list[float]:
     """Per section of the float32 variant, the round-off power (FS^2) it puts at the output at the band's worst
     frequency for :func:`predict_float32` (the cascade input's own term left out)."""
-    terms = _float32_terms(cascade, design, fs)
+    terms = _float32_terms(cascade, design, [s.realised() for s in design.sections], fs)
     worst = int(np.argmax(np.sum(terms, axis=0)))
     return [float(v) for v in terms[1:, worst]]
 
 
-def _float32_terms(cascade: Cascade, design, fs: float) -> np.ndarray:
+def _float32_terms(cascade: Cascade, design, realised, fs: float) -> np.ndarray:
     """(1 + sections, band points): the float32 round-off power at the output per band frequency of the cascade
-    input's difference and of each section (:func:`predict_float32`)."""
+    input's difference and of each section (:func:`predict_float32`; ``realised``: the design's sections as they
+    compute)."""
     w, band = _grids(cascade, fs)
     sections = list(cascade.sections)
-    realised = [s.realised() for s in design.sections]
     # At each band frequency the loudest sine the filter takes: full scale at the input, or less where the gain
     # would drive the output beyond full scale (amplitude 1 / |H|); its noise is referred to a full-scale output.
     amplitude = np.minimum(1.0, 1.0 / np.maximum(np.abs(cascade_response(sections, band)), 1e-300))
